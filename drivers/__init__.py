@@ -1,0 +1,1 @@
+"""Capability interfaces (:mod:`mmexec.drivers.interfaces`) and the real hardware drivers."""
