@@ -48,8 +48,10 @@ __all__ = [
     "LaserScan",
     "Lidar",
     "ManualClock",
+    "OccupancyGrid",
     "Pose2D",
     "Robot",
+    "SceneBox",
 ]
 
 
@@ -410,6 +412,37 @@ class LaserScan:
         return self.angle_min + self.angle_increment * np.arange(len(self.ranges))
 
 
+@dataclass(frozen=True)
+class OccupancyGrid:
+    """A 2D map in ``map`` (map_server convention): ``data[row, col]`` with row 0 at
+    ``origin`` y (rows grow along +y), values 0 free, 100 occupied, -1 unknown;
+    ``resolution`` [m/cell]; ``origin`` is the pose of cell (0, 0)'s corner."""
+
+    data: np.ndarray
+    resolution: float
+    origin: Pose2D = Pose2D()
+
+    @property
+    def width(self) -> int:
+        return int(self.data.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.data.shape[0])
+
+
+@dataclass(frozen=True)
+class SceneBox:
+    """A static box obstacle known in advance (shelf board, table, wall), for planning.
+
+    ``pose`` is the box centre as a 4x4 ``T_map_box``; ``size`` full extents [m].
+    """
+
+    name: str
+    pose: np.ndarray
+    size: tuple[float, float, float]
+
+
 # --------------------------------------------------------------------------- capabilities
 
 
@@ -560,6 +593,10 @@ class Robot(abc.ABC):
     camera: Camera | None = None
     lidar: Lidar | None = None
     profile: dict[str, Any]
+    #: prior knowledge of the environment, in ``map``: a navigation map (from the world in
+    #: sim, from a map_server PGM + YAML on the robot) and static boxes for arm planning.
+    occupancy: OccupancyGrid | None = None
+    scene: tuple[SceneBox, ...] = ()
 
     @abc.abstractmethod
     def spin(self, period: float) -> None:
