@@ -1,0 +1,1 @@
+"""Protocol-level fake devices for tests and bring-up rehearsal (see docs/drivers/fakes.md)."""

@@ -1,0 +1,1 @@
+"""Mock backend: in-memory capabilities with scriptable outcomes (public testing module)."""

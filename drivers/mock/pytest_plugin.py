@@ -1,0 +1,1 @@
+"""pytest fixtures for testing skills against the mock backend."""
