@@ -1,0 +1,340 @@
+"""Primitive skills: wait, report, move the arm, open / close the gripper, drive, stop.
+
+They talk only to the capability interfaces, never block, and are cancellable at any
+tick: a cancelled arm or gripper move cancels its goal and waits for the backend to
+report it stopped; a cancelled drive brakes the base and waits until it is at rest.
+
+Importing this module registers the skills in :data:`mmexec.skills.base.REGISTRY` (the
+executive's config loader and runner import it explicitly).
+
+Robot profile keys read here (all optional):
+
+* ``named_poses``: ``{name: [q1, ..., qn]}`` arm joint poses [rad], for ``move_arm``;
+* ``home``: ``[x, y, theta]`` base pose in ``map`` [m, m, rad], for ``drive_to place=home``;
+* ``places``: ``{name: [x, y, theta]}`` more named base poses in ``map``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Generator, Mapping, Sequence
+from typing import Any
+
+from mmexec.drivers.interfaces import Base, Pose2D
+from mmexec.skills.base import (
+    FailureKind,
+    Output,
+    Param,
+    SkillCancelled,
+    SkillContext,
+    SkillFailure,
+    skill,
+    wait_goal,
+)
+
+__all__ = [
+    "close_gripper",
+    "drive_to",
+    "move_arm",
+    "open_gripper",
+    "report",
+    "stop_base",
+    "wait",
+]
+
+log = logging.getLogger(__name__)
+
+Gen = Generator[None, None, "dict[str, Any]"]
+
+#: Below these speeds [m/s, rad/s] a braking base counts as stopped.
+STOPPED_V = 1e-3
+STOPPED_W = 1e-3
+#: Longest a braking base is waited for [clock s] before the skill gives up waiting.
+BRAKE_LIMIT = 3.0
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+# --------------------------------------------------------------------------- wait / report
+
+
+@skill("wait", params=[Param("seconds", float, unit="s", required=True, doc="clock time to wait")])
+def wait(ctx: SkillContext, seconds: float) -> Gen:
+    """Succeed after ``seconds`` of clock time."""
+    if seconds < 0:
+        raise SkillFailure(FailureKind.PRECONDITION, f"wait: seconds must be >= 0, got {seconds:g}")
+    end = ctx.clock.now() + seconds
+    while ctx.clock.now() < end - 1e-9:
+        yield
+    return {}
+
+
+@skill(
+    "report",
+    params=[
+        Param("message", str, required=True, doc="text for the event log"),
+        Param("level", str, default="info", choices=("info", "warning", "error")),
+    ],
+)
+def report(ctx: SkillContext, message: str, level: str = "info") -> Gen:
+    """Write ``message`` to the event log (event ``report``) and the Python log; succeed."""
+    yield from ()
+    ctx.emit("report", message=message, level=level, node=ctx.node_path)
+    log.log(logging.getLevelName(level.upper()), "%s", message)
+    return {}
+
+
+# --------------------------------------------------------------------------- arm
+
+
+def _named_pose(profile: Mapping[str, Any], name: str) -> list[float]:
+    poses = profile.get("named_poses") or {}
+    if not isinstance(poses, Mapping) or name not in poses:
+        known = sorted(poses) if isinstance(poses, Mapping) else []
+        raise SkillFailure(
+            FailureKind.PRECONDITION,
+            f"move_arm: no named pose {name!r} in the robot profile (known: {', '.join(known) or 'none'})",
+        )
+    q = poses[name]
+    if not isinstance(q, Sequence) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in q):
+        raise SkillFailure(FailureKind.PRECONDITION, f"move_arm: profile pose {name!r} is not a list of numbers")
+    return [float(x) for x in q]
+
+
+@skill(
+    "move_arm",
+    params=[
+        Param("pose", str, doc="named pose from the profile's named_poses"),
+        Param("joints", list, unit="rad", doc="explicit joint vector, in the arm's joint order"),
+        Param("speed_scale", float, default=0.5, doc="fraction (0, 1] of the joints' velocity limits"),
+        Param("timeout", float, unit="s", doc="fail if the move takes longer (clock time)"),
+    ],
+    outputs=[Output("joints", list, doc="joint positions reached [rad]")],
+    needs=("arm",),
+)
+def move_arm(
+    ctx: SkillContext,
+    pose: str | None = None,
+    joints: list[float] | None = None,
+    speed_scale: float = 0.5,
+    timeout: float | None = None,
+) -> Gen:
+    """Move the arm in joint space to a named pose or an explicit joint vector [rad]."""
+    arm = ctx.robot.arm
+    assert arm is not None  # guaranteed by needs=("arm",)
+    if (pose is None) == (joints is None):
+        raise SkillFailure(FailureKind.PRECONDITION, "move_arm: give exactly one of 'pose' or 'joints'")
+    if joints is not None:
+        if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in joints):
+            raise SkillFailure(FailureKind.PRECONDITION, f"move_arm: joints must be numbers, got {joints!r}")
+        q = [float(x) for x in joints]
+    else:
+        assert pose is not None
+        q = _named_pose(ctx.profile, pose)
+    if len(q) != len(arm.joint_names):
+        raise SkillFailure(
+            FailureKind.PRECONDITION,
+            f"move_arm: {len(q)} joint values for an arm with {len(arm.joint_names)} joints",
+        )
+    for lim, x in zip(arm.limits, q):
+        if not lim.contains(x):
+            raise SkillFailure(
+                FailureKind.PRECONDITION,
+                f"move_arm: joint {lim.name!r} target {x:.3f} rad outside [{lim.lower:.3f}, {lim.upper:.3f}]",
+            )
+    if not 0.0 < speed_scale <= 1.0:
+        raise SkillFailure(FailureKind.PRECONDITION, f"move_arm: speed_scale {speed_scale:g} outside (0, 1]")
+    goal = arm.move_to(q, speed_scale=speed_scale)
+    yield from wait_goal(ctx, goal, timeout=timeout)
+    return {"joints": list(arm.state().positions)}
+
+
+# --------------------------------------------------------------------------- gripper
+
+
+@skill(
+    "open_gripper",
+    params=[
+        Param("width", float, unit="m", doc="opening; default fully open"),
+        Param("speed", float, unit="m/s", default=0.1),
+        Param("force", float, unit="N", default=50.0),
+    ],
+    needs=("gripper",),
+)
+def open_gripper(ctx: SkillContext, width: float | None = None, speed: float = 0.1, force: float = 50.0) -> Gen:
+    """Open the gripper fully, or to ``width`` [m]."""
+    gripper = ctx.robot.gripper
+    assert gripper is not None
+    goal = gripper.open(speed=speed, force=force) if width is None else gripper.move(width, speed=speed, force=force)
+    yield from wait_goal(ctx, goal)
+    return {}
+
+
+@skill(
+    "close_gripper",
+    params=[
+        Param("force", float, unit="N", default=50.0, doc="grip force"),
+        Param("speed", float, unit="m/s", default=0.1),
+        Param("expect", str, default="any", choices=("any", "object", "empty"),
+              doc="'object': fail unless something is held; 'empty': fail if something is"),
+    ],
+    outputs=[Output("holding", bool, doc="whether the fingers stopped on an object")],
+    needs=("gripper",),
+)
+def close_gripper(ctx: SkillContext, force: float = 50.0, speed: float = 0.1, expect: str = "any") -> Gen:
+    """Close the gripper; output ``holding``. ``expect`` turns a wrong result into a
+    POSTCONDITION failure."""
+    gripper = ctx.robot.gripper
+    assert gripper is not None
+    goal = gripper.close(speed=speed, force=force)
+    yield from wait_goal(ctx, goal)
+    holding = gripper.state().holding
+    if expect == "object" and not holding:
+        raise SkillFailure(FailureKind.POSTCONDITION, "close_gripper: closed on nothing (expected an object)")
+    if expect == "empty" and holding:
+        raise SkillFailure(FailureKind.POSTCONDITION, "close_gripper: holding an object (expected empty)")
+    return {"holding": holding}
+
+
+# --------------------------------------------------------------------------- base
+
+
+def _brake(ctx: SkillContext, base: Base) -> Generator[None, None, bool]:
+    """Command zero velocity every tick until the base is at rest (or BRAKE_LIMIT passed).
+    Returns True when it came to rest."""
+    end = ctx.clock.now() + BRAKE_LIMIT
+    while True:
+        base.stop()
+        st = base.state()
+        if abs(st.v) < STOPPED_V and abs(st.w) < STOPPED_W:
+            return True
+        if ctx.clock.now() > end:
+            log.warning("base still moving (v=%.3f m/s, w=%.3f rad/s) %.1f s after stop", st.v, st.w, BRAKE_LIMIT)
+            return False
+        try:
+            yield
+        except SkillCancelled:
+            continue  # already braking
+
+
+def _place(profile: Mapping[str, Any], name: str) -> Pose2D:
+    if name == "home" and "home" in profile:
+        raw = profile["home"]
+    else:
+        places = profile.get("places") or {}
+        if not isinstance(places, Mapping) or name not in places:
+            known = (["home"] if "home" in profile else []) + (sorted(places) if isinstance(places, Mapping) else [])
+            raise SkillFailure(
+                FailureKind.PRECONDITION,
+                f"drive_to: no place {name!r} in the robot profile (known: {', '.join(known) or 'none'})",
+            )
+        raw = places[name]
+    if (not isinstance(raw, Sequence) or len(raw) != 3
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in raw)):
+        raise SkillFailure(FailureKind.PRECONDITION, f"drive_to: profile place {name!r} is not [x, y, theta]")
+    return Pose2D(float(raw[0]), float(raw[1]), float(raw[2]))
+
+
+@skill(
+    "drive_to",
+    params=[
+        Param("x", float, unit="m", doc="goal x in map"),
+        Param("y", float, unit="m", doc="goal y in map"),
+        Param("theta", float, unit="rad", doc="goal heading in map; default: keep the arrival heading"),
+        Param("place", str, doc="named goal instead of x/y/theta: 'home' or a profile 'places' key"),
+        Param("tolerance", float, unit="m", default=0.05),
+        Param("angle_tolerance", float, unit="rad", default=0.05),
+        Param("max_linear", float, unit="m/s", default=0.3),
+        Param("max_angular", float, unit="rad/s", default=1.0),
+        Param("timeout", float, unit="s", doc="fail after this much clock time"),
+    ],
+    outputs=[Output("pose", list, doc="[x, y, theta] reached, map frame [m, m, rad]")],
+    needs=("base",),
+)
+def drive_to(
+    ctx: SkillContext,
+    x: float | None = None,
+    y: float | None = None,
+    theta: float | None = None,
+    place: str | None = None,
+    tolerance: float = 0.05,
+    angle_tolerance: float = 0.05,
+    max_linear: float = 0.3,
+    max_angular: float = 1.0,
+    timeout: float | None = None,
+) -> Gen:
+    """Drive the base straight to a pose in ``map`` (turn, drive, turn), with no obstacle
+    avoidance; path planning is the navigation skill's job. A base fault (bumper, cliff,
+    wheel drop) stops the base and fails with EXECUTION."""
+    base = ctx.robot.base
+    assert base is not None
+    if place is not None:
+        if x is not None or y is not None or theta is not None:
+            raise SkillFailure(FailureKind.PRECONDITION, "drive_to: give either 'place' or x/y/theta, not both")
+        goal = _place(ctx.profile, place)
+        gx, gy, gth = goal.x, goal.y, goal.theta
+    else:
+        if x is None or y is None:
+            raise SkillFailure(FailureKind.PRECONDITION, "drive_to: 'x' and 'y' are required (or give 'place')")
+        gx, gy, gth = x, y, theta
+    if tolerance <= 0 or angle_tolerance <= 0 or max_linear <= 0 or max_angular <= 0:
+        raise SkillFailure(FailureKind.PRECONDITION, "drive_to: tolerances and speed limits must be > 0")
+    v_max = min(max_linear, base.max_linear)
+    w_max = min(max_angular, base.max_angular)
+    deadline = None if timeout is None else ctx.clock.now() + timeout
+    k_w = 2.0
+    at_position = False
+    try:
+        while True:
+            st = base.state()
+            if st.faults:
+                yield from _brake(ctx, base)
+                raise SkillFailure(FailureKind.EXECUTION, f"drive_to: base fault: {', '.join(sorted(st.faults))}")
+            if deadline is not None and ctx.clock.now() > deadline:
+                yield from _brake(ctx, base)
+                raise SkillFailure(FailureKind.TIMEOUT, f"drive_to: not there after {timeout:g} s")
+            p = st.pose
+            dx, dy = gx - p.x, gy - p.y
+            dist = math.hypot(dx, dy)
+            if at_position and dist > 2.0 * tolerance:
+                at_position = False
+            if not at_position and dist <= tolerance:
+                at_position = True
+            if not at_position:
+                err = _wrap(math.atan2(dy, dx) - p.theta)
+                w = max(-w_max, min(w_max, k_w * err))
+                v = 0.0 if abs(err) > 0.35 else min(v_max, math.sqrt(2.0 * base.max_linear_accel * 0.5 * dist)) * math.cos(err)
+            else:
+                err = 0.0 if gth is None else _wrap(gth - p.theta)
+                if abs(err) <= angle_tolerance:
+                    rested = yield from _brake(ctx, base)
+                    if not rested:
+                        raise SkillFailure(FailureKind.EXECUTION, "drive_to: the base did not come to rest")
+                    st = base.state()
+                    if st.pose.distance_to(Pose2D(gx, gy)) <= 2.0 * tolerance:
+                        return {"pose": [st.pose.x, st.pose.y, st.pose.theta]}
+                    at_position = False
+                    continue
+                v = 0.0
+                w = max(-w_max, min(w_max, k_w * err))
+                w = math.copysign(max(abs(w), 0.05), w)
+            base.set_velocity(v, w)
+            yield
+    except SkillCancelled:
+        yield from _brake(ctx, base)
+        raise
+
+
+@skill("stop_base", needs=("base",), outputs=[Output("pose", list, doc="[x, y, theta] at rest, map frame")])
+def stop_base(ctx: SkillContext) -> Gen:
+    """Brake the base to rest; fails if it is still moving after a few seconds."""
+    base = ctx.robot.base
+    assert base is not None
+    rested = yield from _brake(ctx, base)
+    if not rested:
+        raise SkillFailure(FailureKind.EXECUTION, "stop_base: the base did not come to rest")
+    p = base.state().pose
+    return {"pose": [p.x, p.y, p.theta]}
