@@ -1,0 +1,202 @@
+"""Run configuration: which backend, its options, the robot profile, user skill modules.
+
+A run config is YAML loaded through :mod:`mmexec.config.yamlload` and bound into
+:class:`RunConfig`, so every problem is reported as ``FILE:LINE:COL: key: message``::
+
+    backend: mock            # mock | sim | robot
+    rate_hz: 20              # tick rate [Hz of clock time]
+    mock: {...}              # options for the backend named by `backend` (one section
+    sim: {...}               #   per backend name; only the selected one is read)
+    profile:                 # robot profile read by skills (free-form mapping):
+      named_poses: {home: [0, 0, 0, 0, 0, 0]}   #   arm poses [rad]
+      home: [0.0, 0.0, 0.0]                      #   base home in map [m, m, rad]
+    skills:
+      modules: [my_lab.skills]   # user skill modules to import (the ONLY way user code loads)
+
+The backend factory maps a backend name to a builder ``build(section, *, profile, seed,
+options) -> Robot`` (see :data:`BACKENDS`); the section is passed still as a
+:class:`~mmexec.config.yamlload.YDict` so the builder can report positions.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, load_yaml
+from mmexec.drivers.interfaces import Robot
+from mmexec.skills.base import REGISTRY, SkillRegistry
+
+__all__ = [
+    "BACKENDS",
+    "CAPABILITIES",
+    "LoadedConfig",
+    "RunConfig",
+    "SkillsConfig",
+    "backend_builder",
+    "build_robot",
+    "load_config",
+    "load_skill_modules",
+    "robot_capabilities",
+]
+
+log = logging.getLogger(__name__)
+
+BackendName = Literal["mock", "sim", "robot"]
+
+#: backend name -> ``module:function`` of its builder.
+BACKENDS: dict[str, str] = {
+    "mock": "mmexec.drivers.mock.backend:build",
+    "sim": "mmexec.sim.backend:build",
+    "robot": "mmexec.drivers.robot:build",
+}
+
+#: Capability attribute names of :class:`~mmexec.drivers.interfaces.Robot`.
+CAPABILITIES: tuple[str, ...] = ("base", "arm", "gripper", "camera", "lidar")
+
+#: Modules that define the built-in skills, imported before any user module.
+BUILTIN_SKILL_MODULES: tuple[str, ...] = ("mmexec.skills.primitives",)
+
+
+@dataclass(frozen=True)
+class SkillsConfig:
+    """``skills:`` section: ``modules`` are imported (in order) to register user skills."""
+
+    modules: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A run config file (see the module doc)."""
+
+    backend: BackendName
+    rate_hz: float = 20.0
+    profile: dict[str, Any] = field(default_factory=dict)
+    skills: SkillsConfig = field(default_factory=SkillsConfig)
+    mock: Any = None
+    sim: Any = None
+    robot: Any = None
+
+    def validate(self) -> list[str]:
+        if not 0.0 < self.rate_hz <= 1000.0:
+            return [f"rate_hz: expected a tick rate in (0, 1000] Hz, got {self.rate_hz:g}"]
+        return []
+
+
+@dataclass(frozen=True)
+class LoadedConfig:
+    """A bound config plus where it came from (path, sha256 of its bytes, raw YAML)."""
+
+    path: Path
+    sha256: str
+    config: RunConfig
+    raw: YDict
+
+    @property
+    def backend(self) -> str:
+        return self.config.backend
+
+    def section(self) -> YDict | None:
+        """The selected backend's section, as loaded (with marks), or None."""
+        value = self.raw.get(self.config.backend)
+        return value if isinstance(value, YDict) else None
+
+    def mark(self, key: str) -> Mark:
+        """Where ``key``'s value is in the file (the file start if absent)."""
+        return self.raw.value_mark(key)
+
+
+def load_config(path: str | Path) -> LoadedConfig:
+    """Load and bind a run config. Raises InputError with every problem located."""
+    p = Path(path)
+    raw = load_yaml(p)
+    name = str(path)
+    if not isinstance(raw, YDict):
+        raise InputError.at(getattr(raw, "mark", Mark(name, 1, 1)),
+                            "expected a mapping with at least 'backend: mock|sim|robot'")
+    problems = Problems()
+    cfg = bind(RunConfig, raw, raw.mark, "", problems)
+    for key in BACKENDS:
+        value = raw.get(key)
+        if value is not None and not isinstance(value, YDict):
+            problems.add(raw.value_mark(key), f"{key}: expected a mapping of backend options, got {value!r}")
+    problems.raise_if_any()
+    assert isinstance(cfg, RunConfig)
+    digest = hashlib.sha256(p.read_bytes()).hexdigest()
+    return LoadedConfig(p, digest, cfg, raw)
+
+
+def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = REGISTRY) -> None:
+    """Import the built-in skill modules, then the config's ``skills.modules``.
+
+    A module that fails to import (missing, syntax error, exception at import) is an
+    InputError naming the module and its line in the config; all are reported together.
+    """
+    for module in BUILTIN_SKILL_MODULES:
+        registry.load_module(module)
+    if loaded is None:
+        return
+    problems = Problems()
+    skills_raw = loaded.raw.get("skills")
+    modules_raw = skills_raw.get("modules") if isinstance(skills_raw, YDict) else None
+    for i, module in enumerate(loaded.config.skills.modules):
+        mark = modules_raw.item_mark(i) if hasattr(modules_raw, "item_mark") else loaded.mark("skills")
+        try:
+            registry.load_module(module)
+        except ModuleNotFoundError as e:
+            missing = e.name or module
+            detail = "no such module" if missing == module else f"it imports {missing!r}, which is not installed"
+            problems.add(mark, f"skills.modules[{i}]: cannot import {module!r}: {detail}")
+        except Exception as e:  # noqa: BLE001 - user code: any import failure is a config problem
+            where = ""
+            if isinstance(e, SyntaxError) and e.filename:
+                where = f" ({e.filename}:{e.lineno})"
+            problems.add(mark, f"skills.modules[{i}]: cannot import {module!r}: {type(e).__name__}: {e}{where}")
+    problems.raise_if_any()
+
+
+def backend_builder(name: str, mark: Mark) -> Callable[..., Robot]:
+    """The builder function for backend ``name``; InputError (at ``mark``) when the
+    backend is unknown or its module is not part of this installation."""
+    target = BACKENDS.get(name)
+    if target is None:
+        raise InputError.at(mark, f"backend: unknown backend {name!r} (expected one of: {', '.join(BACKENDS)})")
+    module_name, func = target.split(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as e:
+        if e.name and (module_name == e.name or module_name.startswith(e.name + ".")):
+            raise InputError.at(
+                mark, f"backend: {name!r} is not available in this installation (module {module_name} not found)"
+            ) from None
+        raise InputError.at(
+            mark, f"backend: {name!r} cannot load: {module_name} needs {e.name!r}, which is not installed"
+        ) from None
+    builder = getattr(module, func, None)
+    if not callable(builder):
+        raise InputError.at(mark, f"backend: {name!r} is not available: {module_name} has no {func}()")
+    return builder  # type: ignore[no-any-return]
+
+
+def build_robot(
+    loaded: LoadedConfig, *, seed: int | None = None, options: Mapping[str, Any] | None = None
+) -> Robot:
+    """Build the configured backend. InputError for a bad section or missing backend;
+    exceptions of the backend itself (a port that will not open) propagate."""
+    builder = backend_builder(loaded.backend, loaded.mark("backend"))
+    opts = {"gui": False, "record": None}
+    opts.update(options or {})
+    robot = builder(loaded.section(), profile=dict(loaded.config.profile), seed=seed, options=opts)
+    if not isinstance(robot, Robot):
+        raise TypeError(f"backend {loaded.backend!r} builder returned {type(robot).__name__}, not a Robot")
+    return robot
+
+
+def robot_capabilities(robot: Robot) -> frozenset[str]:
+    """Names of the capabilities ``robot`` has (a subset of :data:`CAPABILITIES`)."""
+    return frozenset(c for c in CAPABILITIES if getattr(robot, c, None) is not None)
