@@ -1,0 +1,549 @@
+"""Kobuki device: the serial link, its I/O thread, safety logic and odometry.
+
+:class:`KobukiDevice` composes :mod:`.codec` with :class:`~mmexec.drivers.transport.SerialTransport`.
+Nothing happens in ``__init__``; :meth:`KobukiDevice.connect` opens the port, starts
+the I/O thread and waits (bounded) for the stream and the version answer.
+
+The I/O thread, per feedback frame (50 Hz, the robot's cadence):
+
+1. decodes it; updates sensors, faults and odometry (encoder distance, gyro or
+   encoder heading);
+2. applies the safety rules: a bumper, cliff, wheel-drop or overcurrent stops the
+   base at once (no ramp) and motion is refused until it clears; a velocity older
+   than ``command_timeout`` (clock seconds) is replaced by zero;
+3. ramps the output towards the target with the acceleration limiter
+   (``linear_accel`` m/s^2, ``angular_accel`` rad/s^2, decelerating ``decel_factor``
+   times faster), using the firmware timestamps for dt;
+4. sends one Base Control frame (vendor cadence), plus Request Extra until the
+   versions and unique id arrive, plus any queued command (sound, LEDs, gains).
+
+No byte for ``liveness_timeout`` seconds is the ``link_lost`` fault: the target is
+zeroed, and it clears when bytes come back. A port that fails (cable pulled) ends
+the thread with ``link_lost`` latched; :meth:`reconnect` starts again.
+Link timing uses ``time.monotonic()``; the command watchdog and state stamps use
+the injected :class:`~mmexec.drivers.interfaces.Clock`.
+"""
+
+from __future__ import annotations
+
+import enum
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+from mmexec.drivers.interfaces import BaseState, Clock, Pose2D
+from mmexec.drivers.kobuki import codec as k
+from mmexec.drivers.transport import LinkError, SerialSettings, SerialTransport
+
+__all__ = [
+    "KobukiConfig",
+    "KobukiCorruptFrames",
+    "KobukiDevice",
+    "KobukiError",
+    "KobukiFirmwareError",
+    "KobukiInfo",
+    "KobukiLinkError",
+    "KobukiNotConnected",
+    "KobukiTimeout",
+    "LinkState",
+    "SUPPORTED_FIRMWARE_MAJOR",
+]
+
+log = logging.getLogger(__name__)
+
+SUPPORTED_FIRMWARE_MAJOR = 1
+#: hardware spec limits; configured limits may only be lower
+SPEC_MAX_LINEAR = 0.7  # m/s
+SPEC_MAX_ANGULAR = math.pi  # rad/s
+_EXTRA_FLAGS = k.REQUEST_HARDWARE | k.REQUEST_FIRMWARE | k.REQUEST_UID
+_DEFAULT_GP_OUTPUT = 0x00F0  # all power rails on, LEDs off (vendor driver's start value)
+
+
+# --------------------------------------------------------------------------- errors
+
+
+class KobukiError(Exception):
+    """Base of every Kobuki driver error."""
+
+
+class KobukiNotConnected(KobukiError):
+    """An operation needs the link (call connect() first)."""
+
+
+class KobukiLinkError(KobukiError):
+    """The serial link failed: no such port, permission, busy, cable pulled, timeout."""
+
+    def __init__(self, port: str, message: str) -> None:
+        super().__init__(f"kobuki on {port}: {message}")
+        self.port = port
+        self.detail = message
+
+
+class KobukiTimeout(KobukiLinkError):
+    """No valid frame (or no version answer) within the deadline."""
+
+
+class KobukiCorruptFrames(KobukiLinkError):
+    """Bytes arrive but never form a valid frame (wrong baud rate, noise, FTDI latency)."""
+
+
+class KobukiFirmwareError(KobukiError):
+    """The robot runs a firmware this driver refuses (major version != 1)."""
+
+    def __init__(self, port: str, version: k.Version) -> None:
+        super().__init__(
+            f"kobuki on {port}: firmware {version} is not supported (major version must be "
+            f"{SUPPORTED_FIRMWARE_MAJOR}; the vendor recommends 1.1.4 or 1.2.0)"
+        )
+        self.port = port
+        self.version = version
+
+
+# --------------------------------------------------------------------------- config / info
+
+
+@dataclass(frozen=True)
+class KobukiConfig:
+    """Kobuki link and safety settings (SI units; seconds are clock seconds).
+
+    Limits above the hardware spec (0.7 m/s, pi rad/s) are rejected by :meth:`validate`.
+    """
+
+    port: str = "/dev/kobuki"
+    baudrate: int = 115200
+    max_linear: float = 0.7          # m/s
+    max_angular: float = math.pi     # rad/s
+    linear_accel: float = 0.3        # m/s^2
+    angular_accel: float = 3.5       # rad/s^2
+    decel_factor: float = 1.2        # deceleration limit = factor x acceleration limit
+    command_timeout: float = 0.6     # s without a new velocity -> zero
+    liveness_timeout: float = 0.1    # s without a byte -> link_lost
+    connect_timeout: float = 0.5     # s to see the first valid frame
+    version_timeout: float = 1.0     # s to get the firmware version after that
+    gyro_heading: bool = True        # heading from the factory-calibrated gyro (id 4)
+
+    def validate(self) -> list[str]:
+        """Problems with these values ([] when fine)."""
+        out = []
+        if not 0.0 < self.max_linear <= SPEC_MAX_LINEAR:
+            out.append(f"max_linear: {self.max_linear} m/s outside (0, {SPEC_MAX_LINEAR}]")
+        if not 0.0 < self.max_angular <= SPEC_MAX_ANGULAR + 1e-9:
+            out.append(f"max_angular: {self.max_angular} rad/s outside (0, pi]")
+        for name in ("linear_accel", "angular_accel", "command_timeout", "liveness_timeout",
+                     "connect_timeout", "version_timeout"):
+            if not getattr(self, name) > 0.0:
+                out.append(f"{name}: must be > 0, got {getattr(self, name)}")
+        if self.decel_factor < 1.0:
+            out.append(f"decel_factor: must be >= 1, got {self.decel_factor}")
+        if self.baudrate != 115200:
+            out.append(f"baudrate: the Kobuki talks at 115200 baud, got {self.baudrate}")
+        return out
+
+
+@dataclass(frozen=True)
+class KobukiInfo:
+    """What the robot told about itself (filled once the answers arrive)."""
+
+    firmware: k.Version | None
+    hardware: k.Version | None
+    unique_id: tuple[int, int, int] | None
+    battery: float | None  # V
+    frames: int
+    bad_frames: int
+
+    @property
+    def unique_id_text(self) -> str:
+        return "-".join(f"{x:08X}" for x in self.unique_id) if self.unique_id else "unknown"
+
+
+class LinkState(enum.Enum):
+    CLOSED = "closed"
+    CONNECTING = "connecting"
+    STREAMING = "streaming"
+    LOST = "lost"
+
+
+class _MonotonicClock(Clock):
+    def now(self) -> float:
+        return time.monotonic()
+
+
+# --------------------------------------------------------------------------- device
+
+
+class KobukiDevice:
+    """One Kobuki base on a serial port (see module doc). Thread-safe."""
+
+    def __init__(self, config: KobukiConfig, clock: Clock | None = None) -> None:
+        problems = config.validate()
+        if problems:
+            raise ValueError(f"kobuki on {config.port}: " + "; ".join(problems))
+        self.config = config
+        self.clock: Clock = clock or _MonotonicClock()
+        self._transport = SerialTransport(SerialSettings(config.port, config.baudrate))
+        self._lock = threading.RLock()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._first_frame = threading.Event()
+        self._versions = threading.Event()
+        self._link = LinkState.CLOSED
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self._parser = k.FrameParser()
+        self._odom = k.Odometry()
+        self._feedback: k.Feedback | None = None
+        self._core: k.CoreSensors | None = None
+        self._firmware: k.Version | None = None
+        self._hardware: k.Version | None = None
+        self._uid: tuple[int, int, int] | None = None
+        self._controller: k.ControllerInfo | None = None
+        self._malformed = 0
+        self._sensor_faults: frozenset[str] = frozenset()
+        self._link_lost = False
+        self._firmware_bad = False
+        self._target = (0.0, 0.0)
+        self._target_stamp = -math.inf
+        self._out = (0.0, 0.0)
+        self._measured = (0.0, 0.0)
+        self._stamp = 0.0
+        self._last_ts: int | None = None
+        self._last_byte = time.monotonic()
+        self._queue: list[bytes] = []
+        self._gp_output = _DEFAULT_GP_OUTPUT
+        self._refused_logged = False
+        self._error: str = ""
+        self.commands_sent = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def port(self) -> str:
+        return self.config.port
+
+    @property
+    def link_state(self) -> LinkState:
+        with self._lock:
+            return self._link
+
+    def connect(self) -> KobukiInfo:
+        """Open the port, start streaming, check the firmware. Blocks at most
+        ``connect_timeout + version_timeout`` seconds (setup only, never on a tick).
+
+        Raises :class:`KobukiLinkError` (no such port, permission, busy),
+        :class:`KobukiTimeout` (no answer), :class:`KobukiCorruptFrames`,
+        :class:`KobukiFirmwareError`; the port is closed again on any of them.
+        """
+        with self._lock:
+            if self._thread is not None:
+                return self.info()
+            self._reset_state()
+            self._first_frame.clear()
+            self._versions.clear()
+            try:
+                self._transport.open()
+                self._transport.reset_input()
+            except LinkError as e:
+                self._transport.close()
+                raise KobukiLinkError(self.port, e.detail) from e
+            self._link = LinkState.CONNECTING
+            self._stop.clear()
+            self._last_byte = time.monotonic()
+            self._thread = threading.Thread(target=self._run, name=f"kobuki-io {self.port}", daemon=True)
+            self._thread.start()
+        try:
+            cfg = self.config
+            if not self._first_frame.wait(cfg.connect_timeout):
+                with self._lock:
+                    err, bad = self._error, self._parser.bad_checksum + self._parser.bad_length + self._malformed
+                    seen = self._parser.discarded + self._parser.pending
+                if err:
+                    raise KobukiLinkError(self.port, err)
+                if bad or seen:
+                    raise KobukiCorruptFrames(
+                        self.port,
+                        f"corrupt frames: {bad} rejected, no valid frame within {cfg.connect_timeout:g} s "
+                        "(wrong baud rate, noise, or FTDI latency timer not 1 ms?)",
+                    )
+                raise KobukiTimeout(
+                    self.port, f"no answer within {cfg.connect_timeout:g} s (is the base switched on?)"
+                )
+            if not self._versions.wait(cfg.version_timeout):
+                raise KobukiTimeout(self.port, f"no version answer within {cfg.version_timeout:g} s")
+            with self._lock:
+                fw = self._firmware
+            if fw is not None and fw.major != SUPPORTED_FIRMWARE_MAJOR:
+                raise KobukiFirmwareError(self.port, fw)
+        except KobukiError:
+            self.close()
+            raise
+        log.info("kobuki on %s: firmware %s, hardware %s", self.port, self._firmware, self._hardware)
+        return self.info()
+
+    def close(self) -> None:
+        """Send zero velocity, stop the I/O thread, close the port. Idempotent."""
+        with self._lock:
+            self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+            t, self._thread = self._thread, None
+        self._stop.set()
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout=2.0)
+        if self._transport.is_open:
+            try:
+                self._transport.write(k.encode_frame(k.base_control(0, 0)))
+            except LinkError as e:
+                log.warning("kobuki on %s: could not send the final stop: %s", self.port, e.detail)
+        self._transport.close()
+        with self._lock:
+            self._link = LinkState.CLOSED
+
+    def reconnect(self) -> KobukiInfo:
+        """Close and connect again (after a pulled cable, for example)."""
+        self.close()
+        return self.connect()
+
+    def __enter__(self) -> KobukiDevice:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ API (any thread)
+    def info(self) -> KobukiInfo:
+        with self._lock:
+            return KobukiInfo(
+                self._firmware, self._hardware, self._uid,
+                self._core.battery if self._core else None,
+                self._parser.frames, self._parser.bad_checksum + self._parser.bad_length + self._malformed,
+            )
+
+    @property
+    def faults(self) -> frozenset[str]:
+        """Active safety conditions (see :class:`~mmexec.drivers.interfaces.BaseState`)."""
+        with self._lock:
+            return self._faults_locked()
+
+    def _faults_locked(self) -> frozenset[str]:
+        f = set(self._sensor_faults)
+        if self._link_lost or self._link is LinkState.LOST:
+            f.add("link_lost")
+        if self._firmware_bad:
+            f.add("firmware_unsupported")
+        return frozenset(f)
+
+    def set_velocity(self, v: float, w: float) -> bool:
+        """Target ``v`` [m/s], ``w`` [rad/s], clamped to the limits and held for
+        ``command_timeout`` seconds. Returns False (and drives nothing) when refused:
+        a fault is active, or the link is not streaming. Zero is always accepted."""
+        cfg = self.config
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise ValueError(f"kobuki: velocity must be finite, got v={v}, w={w}")
+        v = max(-cfg.max_linear, min(cfg.max_linear, v))
+        w = max(-cfg.max_angular, min(cfg.max_angular, w))
+        with self._lock:
+            if v == 0.0 and w == 0.0:
+                self._target, self._target_stamp = (0.0, 0.0), self.clock.now()
+                return True
+            faults = self._faults_locked()
+            if faults or self._link is not LinkState.STREAMING:
+                if not self._refused_logged:
+                    why = ", ".join(sorted(faults)) or f"link {self._link.value} (call connect() first)"
+                    log.warning("kobuki on %s: motion refused: %s", self.port, why)
+                    self._refused_logged = True
+                self._target = (0.0, 0.0)
+                return False
+            self._refused_logged = False
+            self._target, self._target_stamp = (v, w), self.clock.now()
+            return True
+
+    def stop(self) -> None:
+        """Zero velocity now: target and output, no ramp."""
+        with self._lock:
+            self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+            self._target_stamp = self.clock.now()
+
+    def base_state(self) -> BaseState:
+        """Odometry pose, measured (v, w), stamp of the last frame, faults."""
+        with self._lock:
+            return BaseState(
+                Pose2D(self._odom.x, self._odom.y, self._odom.theta),
+                self._measured[0], self._measured[1], self._stamp, self._faults_locked(),
+            )
+
+    def reset_odometry(self, pose: Pose2D = Pose2D()) -> None:
+        """Set the odometry pose (e.g. to the robot's known start pose in ``map``)."""
+        with self._lock:
+            self._odom.reset(pose.x, pose.y, pose.theta)
+
+    @property
+    def output(self) -> tuple[float, float]:
+        """(v, w) after the limiter, as last sent to the robot."""
+        with self._lock:
+            return self._out
+
+    @property
+    def feedback(self) -> k.Feedback | None:
+        """The latest decoded feedback frame."""
+        with self._lock:
+            return self._feedback
+
+    @property
+    def controller_gains(self) -> k.ControllerInfo | None:
+        with self._lock:
+            return self._controller
+
+    def _require_link(self) -> None:
+        if self._thread is None:
+            raise KobukiNotConnected(f"kobuki on {self.port}: not connected (call connect() first)")
+
+    def play_sound_sequence(self, sequence: int) -> None:
+        """Queue a built-in sound (0 on, 1 off, 2 recharge, 3 button, 4 error, 5, 6)."""
+        self._enqueue(k.sound_sequence(sequence))
+
+    def play_tone(self, frequency_hz: float, duration_s: float) -> None:
+        """Queue a tone of ``frequency_hz`` [Hz] for ``duration_s`` [s] (<= 0.255 s)."""
+        self._enqueue(k.sound(frequency_hz, round(duration_s * 1000)))
+
+    def set_leds(self, led1: str | None = None, led2: str | None = None) -> None:
+        """Set LED colours (``off``, ``red``, ``green``, ``orange``), keeping other GP bits."""
+        bits = {"off": (0, 0), "red": (1, 0), "green": (0, 1), "orange": (1, 1)}
+        with self._lock:
+            value = self._gp_output
+            for colour, red, green in ((led1, 0x0100, 0x0200), (led2, 0x0400, 0x0800)):
+                if colour is None:
+                    continue
+                if colour not in bits:
+                    raise ValueError(f"kobuki: LED colour {colour!r} not one of {sorted(bits)}")
+                r, g = bits[colour]
+                value = (value & ~(red | green)) | (red if r else 0) | (green if g else 0)
+            self._gp_output = value
+        self._enqueue(k.gp_output(value))
+
+    def request_gains(self) -> None:
+        """Ask for the controller gains; :attr:`controller_gains` fills in (firmware >= 1.2)."""
+        self._enqueue(k.get_controller_gain())
+
+    def set_gains(self, kp: float, ki: float, kd: float, *, user: bool = True) -> None:
+        """Set wheel controller gains (``user=False`` restores the factory gains)."""
+        self._enqueue(k.set_controller_gain(user, kp, ki, kd))
+
+    def _enqueue(self, sub: bytes) -> None:
+        with self._lock:
+            self._require_link()
+            self._queue.append(sub)
+
+    # ------------------------------------------------------------------ I/O thread
+    def _run(self) -> None:
+        cfg = self.config
+        while not self._stop.is_set():
+            try:
+                data = self._transport.wait_readable(0.02)
+            except LinkError as e:
+                self._lost(f"link failed: {e.detail}")
+                return
+            now = time.monotonic()
+            with self._lock:
+                if data:
+                    self._last_byte = now
+                    if self._link_lost:
+                        log.info("kobuki on %s: bytes again, link back", self.port)
+                        self._link_lost = False
+                elif now - self._last_byte > cfg.liveness_timeout and not self._link_lost:
+                    log.warning("kobuki on %s: no byte for %.0f ms: link lost", self.port, cfg.liveness_timeout * 1e3)
+                    self._link_lost = True
+                    self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+                payloads = self._parser.feed(data) if data else []
+            for payload in payloads:
+                frame = self._on_frame(payload)
+                if frame is None:
+                    continue
+                try:
+                    self._transport.write(frame)
+                except LinkError as e:
+                    self._lost(f"link failed: {e.detail}")
+                    return
+
+    def _lost(self, why: str) -> None:
+        log.error("kobuki on %s: %s", self.port, why)
+        with self._lock:
+            self._error = why
+            self._link = LinkState.LOST
+            self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+
+    def _on_frame(self, payload: bytes) -> bytes | None:
+        """Handle one feedback payload; return the command frame to send."""
+        try:
+            fb = k.decode_feedback(payload)
+        except k.CodecError as e:
+            with self._lock:
+                self._malformed += 1
+            log.debug("kobuki on %s: %s", self.port, e)
+            return None
+        cfg = self.config
+        with self._lock:
+            self._feedback = fb
+            self._stamp = self.clock.now()
+            if fb.firmware is not None and self._firmware is None:
+                self._firmware = fb.firmware
+                if fb.firmware.major != SUPPORTED_FIRMWARE_MAJOR:
+                    self._firmware_bad = True
+                    log.error("%s", KobukiFirmwareError(self.port, fb.firmware))
+            if fb.hardware is not None:
+                self._hardware = fb.hardware
+            if fb.unique_id is not None:
+                self._uid = fb.unique_id
+            if fb.controller is not None:
+                self._controller = fb.controller
+            dt = 0.02
+            if fb.core is not None:
+                core = fb.core
+                self._core = core
+                if self._last_ts is not None:
+                    dt = ((core.timestamp_ms - self._last_ts) & 0xFFFF) / 1000.0
+                self._last_ts = core.timestamp_ms
+                heading = fb.inertia.heading if (cfg.gyro_heading and fb.inertia is not None) else None
+                step = self._odom.update(core.left_encoder, core.right_encoder, core.timestamp_ms, heading)
+                self._measured = (step.v, step.w)
+                new_faults = core.faults
+                if new_faults - self._sensor_faults:
+                    log.warning("kobuki on %s: stopping: %s", self.port, ", ".join(sorted(new_faults)))
+                self._sensor_faults = new_faults
+            if self._link is LinkState.CONNECTING:
+                self._link = LinkState.STREAMING
+            # safety, watchdog, limiter
+            if self._faults_locked():
+                self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+            elif self.clock.now() - self._target_stamp > cfg.command_timeout:
+                self._target = (0.0, 0.0)
+            self._out = (
+                _ramp(self._out[0], self._target[0], cfg.linear_accel, cfg.decel_factor, min(dt, 0.1)),
+                _ramp(self._out[1], self._target[1], cfg.angular_accel, cfg.decel_factor, min(dt, 0.1)),
+            )
+            subs = [k.base_control(*k.velocity_to_speed_radius(*self._out))]
+            need_versions = self._firmware is None or self._hardware is None or self._uid is None
+            if need_versions:
+                subs.append(k.request_extra(_EXTRA_FLAGS))
+            size = sum(len(s) for s in subs)
+            while self._queue and size + len(self._queue[0]) <= k.MAX_PAYLOAD:
+                sub = self._queue.pop(0)
+                subs.append(sub)
+                size += len(sub)
+            self.commands_sent += 1
+        self._first_frame.set()
+        if self._firmware is not None and (not need_versions or self._firmware_bad):
+            self._versions.set()
+        return k.encode_frame(*subs)
+
+
+def _ramp(current: float, target: float, accel: float, decel_factor: float, dt: float) -> float:
+    """Move ``current`` towards ``target`` by at most accel*dt (speeding up) or
+    decel_factor*accel*dt (slowing down or reversing through zero)."""
+    if target == current:
+        return current
+    speeding_up = (current >= 0.0 and target > current) or (current <= 0.0 and target < current)
+    step = accel * dt * (1.0 if speeding_up else decel_factor)
+    if abs(target - current) <= step:
+        return target
+    return current + math.copysign(step, target - current)
