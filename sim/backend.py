@@ -1,0 +1,315 @@
+"""The pybullet backend: ``build(section, profile=..., seed=..., options=...) -> Robot``.
+
+The executive's config factory calls :func:`build` with the config's ``sim:`` section
+(a :class:`~mmexec.config.yamlload.YDict`, or None for all defaults). Keys (all
+optional, unknown keys are errors; see docs/sim.md):
+
+``robot`` (locobot_wx250s | ur5e_robotiq), ``world`` (shipped name or path),
+``physics_hz`` (240), ``camera`` (width, height, hfov, near, far, noise, pan, tilt,
+mount), ``lidar`` (beams, range_min, range_max, noise), ``odometry_noise`` (linear,
+angular), ``faults`` (see :mod:`mmexec.sim.faults`), ``randomize`` (false).
+
+``options``: ``gui`` (bool) opens the pybullet window; ``record`` (Path or None) writes a
+chase-camera video, finalised by :meth:`SimRobot.close`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pybullet as p
+
+from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, did_you_mean
+from mmexec.drivers.interfaces import CameraIntrinsics, CapabilityError, Pose2D, Robot
+from mmexec.sim.capabilities import (
+    CameraNoise,
+    OdometryNoise,
+    SimArm,
+    SimBase,
+    SimCamera,
+    SimClock,
+    SimCore,
+    SimGripper,
+    SimLidar,
+)
+from mmexec.sim.faults import FaultConfig, FaultInjector, blocking_obstacles
+from mmexec.sim.models import MODEL_INFO, urdf_path
+from mmexec.sim.recording import Recorder
+from mmexec.sim.scene import spawn_world
+from mmexec.sim.world import World, load_world
+
+__all__ = ["CameraSection", "LidarSection", "SimError", "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
+
+log = logging.getLogger(__name__)
+
+
+class SimError(CapabilityError):
+    """The simulation cannot start as asked (no display for the GUI, bad record path)."""
+
+
+@dataclass(frozen=True)
+class CameraSection:
+    """Camera: image ``width``/``height`` [px] and horizontal FOV ``hfov`` [rad] (None =
+    the model's default: 640 x 480, 0.994837 rad on the LoCoBot), clip ``near``/``far``
+    [m], ``noise``, LoCoBot head ``pan``/``tilt`` [rad], and for a wrist camera a
+    ``mount`` correction [x, y, z, roll, pitch, yaw] (m, rad) of the optical frame."""
+
+    width: int | None = None
+    height: int | None = None
+    hfov: float | None = None
+    near: float = 0.01
+    far: float = 10.0
+    noise: CameraNoise = field(default_factory=CameraNoise)
+    pan: float = 0.0
+    tilt: float = 0.0
+    mount: tuple[float, float, float, float, float, float] | None = None
+
+    def validate(self) -> list[str]:
+        out = []
+        if (self.width is not None and not 16 <= self.width <= 4096) or (self.height is not None and not 16 <= self.height <= 4096):
+            out.append("camera width and height must be 16..4096 px")
+        if self.hfov is not None and not 0.1 < self.hfov < 3.0:
+            out.append(f"camera hfov {self.hfov} rad outside (0.1, 3.0)")
+        if not 0 < self.near < self.far:
+            out.append(f"camera needs 0 < near < far, got near={self.near}, far={self.far}")
+        return out
+
+
+@dataclass(frozen=True)
+class LidarSection:
+    """Lidar: ``beams`` per 360 degree scan (RPLIDAR A2 at 10 Hz: 800; default 400 as the
+    official Gazebo stand-in, for speed), ``range_min``/``range_max`` [m], range ``noise`` std [m]."""
+
+    beams: int = 400
+    range_min: float = 0.15
+    range_max: float = 12.0
+    noise: float = 0.01
+
+    def validate(self) -> list[str]:
+        out = []
+        if not 8 <= self.beams <= 16000:
+            out.append(f"lidar beams {self.beams} outside 8..16000")
+        if not 0 <= self.range_min < self.range_max:
+            out.append(f"lidar needs 0 <= range_min < range_max, got {self.range_min}, {self.range_max}")
+        if self.noise < 0:
+            out.append("lidar noise must be >= 0")
+        return out
+
+
+@dataclass(frozen=True)
+class SimSection:
+    """The ``sim:`` config section."""
+
+    robot: Literal["locobot_wx250s", "ur5e_robotiq"] = "locobot_wx250s"
+    world: str = "lab"
+    physics_hz: int = 240
+    camera: CameraSection = field(default_factory=CameraSection)
+    lidar: LidarSection = field(default_factory=LidarSection)
+    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    faults: FaultConfig = field(default_factory=FaultConfig)
+    randomize: bool = False
+
+    def validate(self) -> list[str]:
+        return [] if 30 <= self.physics_hz <= 2000 else [f"physics_hz {self.physics_hz} outside 30..2000"]
+
+
+def parse_section(section: YDict | Mapping[str, Any] | None) -> SimSection:
+    """Bind a ``sim:`` section into :class:`SimSection`; raises :class:`InputError`."""
+    problems = Problems()
+    mark = getattr(section, "mark", Mark("<sim>", 1, 1))
+    out = bind(SimSection, section, mark, "sim", problems)
+    problems.raise_if_any()
+    assert isinstance(out, SimSection)
+    return out
+
+
+def _check_fault_items(cfg: SimSection, world: World, section: Any) -> None:
+    names = set(world.item_names())
+    faults = section.get("faults") if isinstance(section, Mapping) else None
+    default = getattr(section, "mark", Mark("<sim>", 1, 1))
+    problems = Problems()
+    for key, item in cfg.faults.item_names():
+        if item not in names:
+            top = key.split(".")[0]
+            m = faults.value_mark(top) if isinstance(faults, YDict) else default
+            problems.add(m, f"sim.faults.{key}: no item {item!r} in world {world.name!r}"
+                         + (did_you_mean(item, names) or f" (items: {', '.join(sorted(names))})"))
+    problems.raise_if_any()
+
+
+@dataclass
+class SimTruth:
+    """Ground truth, SIM-ONLY: for tests and campaign scoring, never for skills."""
+
+    _robot: SimRobot
+
+    def base_pose(self) -> Pose2D:
+        """True base pose in ``map``."""
+        return self._robot.core.true_pose
+
+    def item_pose(self, name: str) -> np.ndarray:
+        """True ``T_map_item`` (box centre; marker on the local +x face)."""
+        r = self._robot
+        pos, orn = p.getBasePositionAndOrientation(r.scene_handles.items[name], physicsClientId=r.cid)
+        T = np.eye(4)
+        T[:3, :3] = np.array(p.getMatrixFromQuaternion(orn)).reshape(3, 3)
+        T[:3, 3] = pos
+        return T
+
+    def item_poses(self) -> dict[str, np.ndarray]:
+        return {n: self.item_pose(n) for n in self._robot.world.item_names()}
+
+    def held_item(self) -> str | None:
+        g = self._robot.gripper
+        return g.held if isinstance(g, SimGripper) else None
+
+    def in_depot(self, name: str) -> str | None:
+        """Name of the depot whose basket holds item ``name`` (centre inside the walls,
+        below the rim, not held), or None."""
+        if self.held_item() == name:
+            return None
+        T = self.item_pose(name)
+        for d in self._robot.world.spec.depots:
+            c, s = math.cos(d.pose[2]), math.sin(d.pose[2])
+            dx, dy = T[0, 3] - d.pose[0], T[1, 3] - d.pose[1]
+            lx, ly = c * dx + s * dy, -s * dx + c * dy
+            if abs(lx) < d.size[0] / 2 and abs(ly) < d.size[1] / 2 and T[2, 3] < d.size[2] + 0.05:
+                return d.name
+        return None
+
+    def items_in_depot(self) -> dict[str, str]:
+        return {n: d for n in self._robot.world.item_names() if (d := self.in_depot(n)) is not None}
+
+    def faults_fired(self) -> list[tuple[float, str]]:
+        return list(self._robot.injector.fired)
+
+
+class SimRobot(Robot):
+    """A simulated robot in a world. Build with :func:`build`."""
+
+    def __init__(self, *, cid: int, core: SimCore, world: World, cfg: SimSection, profile: dict[str, Any],
+                 scene_handles: Any, injector: FaultInjector, recorder: Recorder | None) -> None:
+        self.cid, self.core, self.world, self.config = cid, core, world, cfg
+        self.name = f"sim:{cfg.robot}@{world.name}"
+        self.scene_handles = scene_handles
+        self.injector = injector
+        self.recorder = recorder
+        self.clock = core.clock
+        self.profile = profile
+        self.occupancy = world.occupancy(0.05)
+        self.scene = world.scene_boxes()
+        info = core.info
+        self.base = SimBase(core, cfg.odometry_noise, ("base_link",) if cfg.robot == "locobot_wx250s" else ("mobile_base_link",))
+        self.arm = SimArm(core)
+        self.gripper = SimGripper(core)
+        w, h = cfg.camera.width or info.camera_size[0], cfg.camera.height or info.camera_size[1]
+        intr = CameraIntrinsics.from_fov(w, h, cfg.camera.hfov or info.camera_hfov)
+        mount = None
+        if cfg.camera.mount is not None:
+            x, y, z, r, pp, yw = cfg.camera.mount
+            mount = np.eye(4)
+            mount[:3, :3] = np.array(p.getMatrixFromQuaternion(p.getQuaternionFromEuler((r, pp, yw)))).reshape(3, 3)
+            mount[:3, 3] = (x, y, z)
+        self.camera = SimCamera(core, intr, cfg.camera.near, cfg.camera.far, cfg.camera.noise, self.base, mount)
+        if info.pan_tilt_joints:
+            self.camera.set_pan_tilt(cfg.camera.pan, cfg.camera.tilt)
+        self.lidar = SimLidar(core, cfg.lidar.beams, cfg.lidar.range_min, cfg.lidar.range_max, cfg.lidar.noise)
+        self.truth = SimTruth(self)  #: SIM-ONLY ground truth (tests, campaign scoring)
+        self._closed = False
+
+    def spin(self, period: float) -> None:
+        """Step physics by exactly ``period`` [s] of sim time: period * physics_hz whole substeps."""
+        if self._closed:
+            raise SimError("spin() after close()")
+        hz = self.clock.hz
+        n = round(period * hz)
+        if n < 1 or abs(n - period * hz) > 1e-6 * max(1.0, period * hz):
+            raise ValueError(f"period {period} s is not a whole number of {hz} Hz physics substeps")
+        dt = 1.0 / hz
+        for _ in range(n):
+            self.base.update(dt)
+            self.arm.update(dt)
+            self.gripper.update(dt)
+            p.stepSimulation(physicsClientId=self.cid)
+            self.clock.steps += 1
+            if self.recorder is not None:
+                tp = self.core.true_pose
+                self.recorder.sample(self.clock.now(), (tp.x, tp.y), tp.theta)
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self.safe_stop()
+        self._closed = True
+        try:
+            if self.recorder is not None:
+                self.recorder.close()
+        finally:
+            p.disconnect(physicsClientId=self.cid)
+
+
+def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None,
+          options: Mapping[str, Any]) -> SimRobot:
+    """Build a simulated robot from a ``sim:`` config section (see module doc).
+
+    Raises :class:`InputError` for a bad section or world file (``FILE:LINE:COL``),
+    :class:`SimError` when the GUI or recording cannot start.
+    """
+    cfg = parse_section(section)
+    wmark = section.value_mark("world") if isinstance(section, YDict) and "world" in section else None
+    world = load_world(cfg.world, seed=seed, randomize=cfg.randomize, mark=wmark)
+    _check_fault_items(cfg, world, section)
+    if cfg.faults.nav_blocked:
+        world = load_world(cfg.world, seed=seed, randomize=cfg.randomize, mark=wmark,
+                           extra_obstacles=blocking_obstacles(world, cfg.faults.nav_blocked, cfg.faults.nav_blocked_depth))
+    record = options.get("record")
+    if record is not None and Path(record).suffix.lower() not in (".mp4", ".gif"):
+        raise SimError(f"--record {record}: the file must end in .mp4 or .gif")
+    if options.get("gui"):
+        if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+            raise SimError("--gui: no display (DISPLAY is not set); run headless or under a desktop session")
+        cid = p.connect(p.GUI)
+    else:
+        cid = p.connect(p.DIRECT)
+    if cid < 0:
+        raise SimError("pybullet could not start a physics client")
+    try:
+        p.setGravity(0, 0, -9.81, physicsClientId=cid)
+        p.setTimeStep(1.0 / cfg.physics_hz, physicsClientId=cid)
+        p.setPhysicsEngineParameter(numSolverIterations=30, deterministicOverlappingPairs=1, physicsClientId=cid)
+        handles = spawn_world(world, cid, marker_bias=cfg.faults.marker_bias)
+        info = MODEL_INFO[cfg.robot]
+        body = p.loadURDF(str(urdf_path(cfg.robot)), [world.start.x, world.start.y, 0.0],
+                          p.getQuaternionFromEuler((0, 0, world.start.theta)), useFixedBase=True,
+                          flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
+        links, joints = {}, {}
+        for i in range(p.getNumJoints(body, physicsClientId=cid)):
+            ji = p.getJointInfo(body, i, physicsClientId=cid)
+            links[ji[12].decode()] = i
+            joints[ji[1].decode()] = i
+            if ji[2] != p.JOINT_FIXED:
+                p.setJointMotorControl2(body, i, p.VELOCITY_CONTROL, force=0.0 if ji[2] == p.JOINT_REVOLUTE and "wheel" in ji[1].decode() else 1.0, physicsClientId=cid)
+        for name in info.finger_links:
+            p.changeDynamics(body, links[name], lateralFriction=1.0, physicsClientId=cid)
+        rng = np.random.default_rng(seed)
+        injector = FaultInjector(cfg.faults, np.random.default_rng(rng.integers(2**63)))
+        core = SimCore(cid=cid, body=body, info=info, clock=SimClock(cfg.physics_hz),
+                       rng=np.random.default_rng(rng.integers(2**63)), faults=injector, scene=handles,
+                       links=links, joints=joints, true_pose=world.start)
+        core.place_base(world.start)
+        recorder = Recorder(Path(record), cid) if record is not None else None
+        robot = SimRobot(cid=cid, core=core, world=world, cfg=cfg, profile=dict(profile), scene_handles=handles,
+                         injector=injector, recorder=recorder)
+        robot.arm.set_positions(info.sleep_pose)
+        robot.gripper.set_width(robot.gripper.max_width)
+        return robot
+    except BaseException:
+        p.disconnect(physicsClientId=cid)
+        raise

@@ -1,0 +1,638 @@
+"""Capability implementations on pybullet: Base, Arm, Gripper, Camera, Lidar, Clock.
+
+All of them share one :class:`SimCore` (client id, robot body, link/joint indices, the
+sim clock, the seeded generator, the fault injector). Nothing here steps physics by
+itself: :meth:`mmexec.sim.backend.SimRobot.spin` calls each capability's ``update(dt)``
+once per physics substep and then ``p.stepSimulation()``. Calls from skills only set
+targets or read state, so they never block.
+
+Frames: ``base_link`` in the interfaces is the model's root link (``base_footprint``,
+on the floor). The robot is a fixed-base multibody moved kinematically: each substep
+the base pose is integrated from the commanded velocity (within velocity and
+acceleration limits) and the robot is placed there unless its body would intersect
+static geometry, in which case it stays and reports a bumper fault.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pybullet as p
+
+from mmexec.drivers.interfaces import (
+    Arm,
+    Base,
+    BaseState,
+    Camera,
+    CameraFrame,
+    CameraIntrinsics,
+    Clock,
+    Goal,
+    GoalState,
+    GraspState,
+    Gripper,
+    GripperState,
+    JointLimit,
+    JointState,
+    JointTrajectory,
+    LaserScan,
+    Lidar,
+    Pose2D,
+)
+from mmexec.sim.faults import FaultInjector
+from mmexec.sim.models import ModelInfo
+from mmexec.sim.scene import SceneHandles
+
+__all__ = ["SimArm", "SimBase", "SimCamera", "SimClock", "SimCore", "SimGripper", "SimLidar"]
+
+log = logging.getLogger(__name__)
+
+
+class SimClock(Clock):
+    """Simulation time: ``steps / physics_hz`` seconds, advanced only by the backend."""
+
+    def __init__(self, physics_hz: int) -> None:
+        self.hz = physics_hz
+        self.steps = 0
+
+    def now(self) -> float:
+        return self.steps / self.hz
+
+
+def _mat(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = np.array(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
+    T[:3, 3] = pos
+    return T
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+@dataclass
+class SimCore:
+    """State shared by the capabilities of one simulated robot."""
+
+    cid: int
+    body: int
+    info: ModelInfo
+    clock: SimClock
+    rng: np.random.Generator
+    faults: FaultInjector
+    scene: SceneHandles
+    links: dict[str, int] = field(default_factory=dict)
+    joints: dict[str, int] = field(default_factory=dict)
+    true_pose: Pose2D = Pose2D()
+    held_body: int | None = None
+
+    def link_T(self, name: str) -> np.ndarray:
+        """``T_world_link`` of a model link (world = ``map``)."""
+        s = p.getLinkState(self.body, self.links[name], computeForwardKinematics=True, physicsClientId=self.cid)
+        return _mat(s[4], s[5])
+
+    def base_T(self) -> np.ndarray:
+        """``T_map_base`` of the true base pose."""
+        return self.true_pose.matrix()
+
+    def in_base(self, name: str) -> np.ndarray:
+        """``T_base_link`` of a model link."""
+        return np.linalg.inv(self.base_T()) @ self.link_T(name)
+
+    def place_base(self, pose: Pose2D) -> None:
+        self.true_pose = pose
+        q = p.getQuaternionFromEuler((0.0, 0.0, pose.theta))
+        p.resetBasePositionAndOrientation(self.body, (pose.x, pose.y, 0.0), q, physicsClientId=self.cid)
+
+
+# --------------------------------------------------------------------------- base
+
+
+@dataclass(frozen=True)
+class OdometryNoise:
+    """Odometry drift per substep increment: the measured distance is ``ds * (1 + linear
+    * n1)`` and the measured turn ``dth + |dth| * angular * n2 + |ds| * 0.1 * angular *
+    n3`` (n ~ N(0, 1)), so the estimate drifts like wheel slip and gyro bias would."""
+
+    linear: float = 0.01
+    angular: float = 0.02
+
+
+class SimBase(Base):
+    """Kinematic differential drive with limits, a 0.6 s watchdog, bumper stop and
+    drifting odometry. ``state().pose`` is the odometry estimate in ``map`` (starting at
+    the true start pose); the truth is on ``SimRobot.truth``."""
+
+    def __init__(self, core: SimCore, noise: OdometryNoise, bump_links: tuple[str, ...]) -> None:
+        self._c = core
+        self._noise = noise
+        self.max_linear = core.info.max_linear
+        self.max_angular = core.info.max_angular
+        self.radius = core.info.footprint_radius
+        self._cmd = (0.0, 0.0)
+        self._cmd_time = -math.inf
+        self._v = 0.0
+        self._w = 0.0
+        self._est = core.true_pose
+        self._faults: frozenset[str] = frozenset()
+        self._bump_links = tuple(core.links[n] for n in bump_links)
+        self.bumps = 0  #: number of substeps refused for collision (for tests and scoring)
+
+    def state(self) -> BaseState:
+        return BaseState(pose=self._est, v=self._v, w=self._w, stamp=self._c.clock.now(), faults=self._faults)
+
+    def set_velocity(self, v: float, w: float) -> None:
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise ValueError(f"base velocity must be finite, got v={v}, w={w}")
+        self._cmd = (max(-self.max_linear, min(self.max_linear, v)), max(-self.max_angular, min(self.max_angular, w)))
+        self._cmd_time = self._c.clock.now()
+
+    def reset_estimate(self, pose: Pose2D) -> None:
+        """Sim-only: set the odometry estimate (as a localisation fix would)."""
+        self._est = pose
+
+    def _collides(self) -> tuple[bool, float]:
+        """Whether the base body intersects static geometry, and the contact bearing [rad]."""
+        c = self._c
+        for li in self._bump_links:
+            for pt in p.getClosestPoints(c.body, c.scene.static, 0.0, linkIndexA=li, physicsClientId=c.cid):
+                if pt[8] < -1e-4:
+                    d = np.array(pt[5]) - np.array([c.true_pose.x, c.true_pose.y, 0.0])
+                    return True, _wrap(math.atan2(d[1], d[0]) - c.true_pose.theta)
+        return False, 0.0
+
+    def update(self, dt: float) -> None:
+        now = self._c.clock.now()
+        tv, tw = self._cmd if now - self._cmd_time <= self.command_timeout else (0.0, 0.0)
+        if self._faults & {"bumper_left", "bumper_centre", "bumper_right"} and tv > 0:
+            tv = 0.0 if self._v >= 0 else tv
+        dv, dw = self.max_linear_accel * dt, self.max_angular_accel * dt
+        self._v += max(-dv, min(dv, tv - self._v))
+        self._w += max(-dw, min(dw, tw - self._w))
+        if self._v == 0.0 and self._w == 0.0:
+            return
+        c = self._c
+        old = c.true_pose
+        th = old.theta + self._w * dt / 2
+        new = Pose2D(old.x + self._v * dt * math.cos(th), old.y + self._v * dt * math.sin(th), _wrap(old.theta + self._w * dt))
+        c.place_base(new)
+        hit, ang = self._collides()
+        if hit:
+            c.place_base(old)
+            side = "bumper_left" if ang > 0.35 else "bumper_right" if ang < -0.35 else "bumper_centre"
+            self._faults = frozenset({side})
+            self._v = self._w = 0.0
+            self.bumps += 1
+            return
+        self._faults = frozenset()
+        # odometry: integrate the measured increments with multiplicative noise
+        ds, dth = self._v * dt, self._w * dt
+        n = self._noise
+        ds_m = ds * (1.0 + n.linear * c.rng.standard_normal()) if n.linear else ds
+        dth_m = dth + abs(dth) * n.angular * c.rng.standard_normal() + abs(ds) * n.angular * 0.1 * c.rng.standard_normal() if n.angular else dth
+        e = self._est
+        eth = e.theta + dth_m / 2
+        self._est = Pose2D(e.x + ds_m * math.cos(eth), e.y + ds_m * math.sin(eth), _wrap(e.theta + dth_m))
+
+
+# --------------------------------------------------------------------------- arm
+
+
+class SimArm(Arm):
+    """Position-controlled joints following a :class:`JointTrajectory` sampled every
+    substep. Checks range and velocity limits before moving; succeeds when the last
+    waypoint is reached within ``tolerance`` [rad]; fails when it is not reached
+    ``settle_time`` after the trajectory's end (blocked by a collision) or on an
+    injected fault. Cancel ramps the velocity to zero over ``stop_time`` seconds."""
+
+    tolerance = 0.01
+    settle_time = 1.5
+    stop_time = 0.15
+
+    def __init__(self, core: SimCore) -> None:
+        self._c = core
+        self._idx = [core.joints[n] for n in core.info.arm_joints]
+        lims = []
+        for n, i in zip(core.info.arm_joints, self._idx):
+            ji = p.getJointInfo(core.body, i, physicsClientId=core.cid)
+            lims.append(JointLimit(n, ji[8], ji[9], ji[11], effort=ji[10]))
+        self._limits = tuple(lims)
+        self._goal: Goal | None = None
+        self._traj: JointTrajectory | None = None
+        self._start_q: tuple[float, ...] = ()
+        self._t0 = 0.0
+        self._fail_at: float | None = None
+        self._stop: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._hold: np.ndarray | None = None
+        self.attempts = 0
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self._c.info.arm_joints
+
+    @property
+    def limits(self) -> tuple[JointLimit, ...]:
+        return self._limits
+
+    @property
+    def mount(self) -> np.ndarray:
+        return self._c.in_base(self._c.info.arm_base_link)
+
+    def _q(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        st = p.getJointStates(self._c.body, self._idx, physicsClientId=self._c.cid)
+        return (np.array([s[0] for s in st]), np.array([s[1] for s in st]), np.array([s[3] for s in st]))
+
+    def state(self) -> JointState:
+        q, dq, eff = self._q()
+        return JointState(self.joint_names, tuple(q.tolist()), tuple(dq.tolist()), tuple(eff.tolist()), self._c.clock.now())
+
+    def set_positions(self, q: Sequence[float]) -> None:
+        """Sim-only: teleport the arm (setup and tests), holding there."""
+        for i, v in zip(self._idx, q):
+            p.resetJointState(self._c.body, i, float(v), 0.0, physicsClientId=self._c.cid)
+        self._hold = np.array(q, dtype=float)
+
+    def _check(self, traj: JointTrajectory, q0: np.ndarray) -> str:
+        if tuple(traj.joint_names) != self.joint_names:
+            return f"trajectory joints {list(traj.joint_names)} differ from the arm's {list(self.joint_names)}"
+        prev_t, prev = 0.0, q0
+        for t, wp in zip(traj.times, traj.positions):
+            for lim, v in zip(self._limits, wp):
+                if not math.isfinite(v) or not lim.contains(v, 1e-6):
+                    return f"joint {lim.name}: target {v:.4f} outside limits [{lim.lower:.4f}, {lim.upper:.4f}] at t={t:.3f} s"
+            seg = np.array(wp) - prev
+            for lim, d in zip(self._limits, seg):
+                vel = abs(d) / (t - prev_t)
+                if vel > lim.velocity * (1 + 1e-6):
+                    return f"joint {lim.name}: velocity {vel:.3f} rad/s above limit {lim.velocity:.3f} before t={t:.3f} s"
+            prev_t, prev = t, np.array(wp)
+        return ""
+
+    def follow(self, trajectory: JointTrajectory) -> Goal:
+        if self._goal is not None and not self._goal.done():
+            self._goal.fail("preempted by a new trajectory")
+        q0, _, _ = self._q()
+        problem = self._check(trajectory, q0)
+        if problem:
+            return Goal.failed("arm.follow", problem)
+        now = self._c.clock.now()
+        self.attempts += 1
+        goal = Goal("arm.follow", on_cancel=self._on_cancel)
+        self._goal, self._traj, self._start_q, self._t0 = goal, trajectory, tuple(q0.tolist()), now
+        self._stop = None
+        self._fail_at = now + trajectory.duration / 2 if self._c.faults.arm_attempt_fails(now) else None
+        return goal
+
+    def _on_cancel(self, goal: Goal) -> None:
+        q, dq, _ = self._q()
+        self._stop = (self._c.clock.now(), q, dq)
+        self._traj = None
+
+    def stop(self) -> None:
+        if self._goal is not None and not self._goal.done():
+            self._goal.cancel()
+        elif self._stop is None:
+            self._hold = self._q()[0]
+
+    def _sample(self, t: float) -> np.ndarray:
+        traj = self._traj
+        assert traj is not None
+        if t < traj.times[0]:
+            a = t / traj.times[0]
+            return np.array(self._start_q) + a * (np.array(traj.positions[0]) - np.array(self._start_q))
+        return np.array(traj.sample(t))
+
+    def _command(self, target: np.ndarray) -> None:
+        c = self._c
+        p.setJointMotorControlArray(c.body, self._idx, p.POSITION_CONTROL, targetPositions=target.tolist(),
+                                    forces=[max(50.0, 5 * lim.effort) for lim in self._limits],
+                                    positionGains=[0.5] * len(self._idx), physicsClientId=c.cid)
+
+    def update(self, dt: float) -> None:
+        now = self._c.clock.now() + dt
+        goal = self._goal
+        if self._stop is not None:
+            t0, q, dq = self._stop
+            s = min(now - t0, self.stop_time)
+            target = q + dq * (s - s * s / (2 * self.stop_time))
+            self._command(target)
+            if now - t0 >= self.stop_time:
+                self._hold, self._stop = target, None
+                if goal is not None:
+                    goal.mark_cancelled("cancelled: arm stopped and holding")
+            return
+        if goal is None or goal.done() or self._traj is None:
+            if self._hold is None:
+                self._hold = self._q()[0]
+            self._command(self._hold)
+            return
+        t = now - self._t0
+        if self._fail_at is not None and now >= self._fail_at:
+            q = self._q()[0]
+            self._hold, self._traj = q, None
+            self._command(q)
+            goal.fail(f"arm motion failed at t={t:.2f} s (injected fault, attempt {self.attempts})")
+            return
+        self._command(self._sample(t))
+        if t >= self._traj.duration:
+            q = self._q()[0]
+            err = np.abs(q - np.array(self._traj.positions[-1]))
+            if float(err.max()) <= self.tolerance:
+                self._hold, self._traj = np.array(self._traj.positions[-1]), None
+                goal.succeed(self.state())
+            elif t >= self._traj.duration + self.settle_time:
+                j = int(np.argmax(err))
+                self._hold, self._traj = q, None
+                goal.fail(f"joint {self.joint_names[j]}: {err[j]:.3f} rad short of the goal {self.settle_time} s "
+                          f"after the trajectory ended (blocked?)")
+
+
+# --------------------------------------------------------------------------- gripper
+
+
+class SimGripper(Gripper):
+    """Two prismatic pads under position control with a force limit.
+
+    A move succeeds when the pads stop: at the width (``AT_POSITION``) or early while
+    closing with contact on both pads (``CONTACT_CLOSING``). An item is held only then:
+    a fixed constraint to the tool frame carries it, with a strength from the friction
+    the pads can produce (``mu * force``). Grasped off-centre (item centre more than
+    ``slip_offset`` from the pad centre along the fingers) the hold is weaker than the
+    item's weight, so it slides out and is dropped (``DROPPED``). Opening releases it.
+    """
+
+    friction = 0.8
+    slip_offset = 0.02  # m
+
+    def __init__(self, core: SimCore) -> None:
+        self._c = core
+        info = core.info
+        self.min_width, self.max_width = info.gripper_width_range
+        self.max_force = info.gripper_force
+        self._idx = [core.joints[n] for n in info.gripper_joints]
+        self._pads = [core.links[n] for n in info.finger_links]
+        self._goal: Goal | None = None
+        self._target = self.max_width
+        self._cmd = self.max_width
+        self._speed = info.gripper_speed
+        self._force = self.max_force
+        self._closing = False
+        self._still = 0
+        self._grasp = GraspState.AT_POSITION
+        self.held: str | None = None
+        self._cons: int | None = None
+        self._held_since = 0.0
+        self._slip_after: float | None = None
+        self._hold_T: np.ndarray | None = None
+
+    def _width(self) -> float:
+        st = p.getJointStates(self._c.body, self._idx, physicsClientId=self._c.cid)
+        return self._c.info.q_to_width(st[0][0], st[1][0])
+
+    def state(self) -> GripperState:
+        return GripperState(self._width(), self._grasp, self._c.clock.now())
+
+    def set_width(self, width: float) -> None:
+        """Sim-only: teleport the pads (setup and tests)."""
+        for i, q in zip(self._idx, self._c.info.width_to_q(width)):
+            p.resetJointState(self._c.body, i, q, 0.0, physicsClientId=self._c.cid)
+        self._cmd = self._target = width
+
+    def move(self, width: float, *, speed: float = 0.1, force: float = 50.0) -> Goal:
+        if not (self.min_width - 1e-6 <= width <= self.max_width + 1e-6):
+            return Goal.failed("gripper.move", f"width {width:.4f} m outside [{self.min_width}, {self.max_width}] m")
+        if speed <= 0 or force <= 0:
+            return Goal.failed("gripper.move", f"speed and force must be > 0 (got {speed}, {force})")
+        if self._goal is not None and not self._goal.done():
+            self._goal.fail("preempted by a new gripper move")
+        cur = self._width()
+        self._closing = width < cur
+        if not self._closing:
+            self._release(GraspState.MOVING)
+        self._target = width
+        self._cmd = cur
+        self._speed = min(speed, self._c.info.gripper_speed)
+        self._force = min(force, self.max_force)
+        self._still = 0
+        self._grasp = GraspState.MOVING
+        self._goal = Goal("gripper.move", on_cancel=self._on_cancel)
+        return self._goal
+
+    def _on_cancel(self, goal: Goal) -> None:
+        self._target = self._cmd = self._width()
+        self._grasp = GraspState.AT_POSITION
+        goal.mark_cancelled("cancelled: fingers stopped")
+
+    def _release(self, state: GraspState) -> None:
+        if self._cons is not None:
+            p.removeConstraint(self._cons, physicsClientId=self._c.cid)
+            self._cons = None
+        self.held = None
+        self._c.held_body = None
+        self._grasp = state
+
+    def _contacts(self) -> list[set[int]]:
+        c = self._c
+        out = []
+        for li in self._pads:
+            bodies = {pt[2] for pt in p.getContactPoints(bodyA=c.body, linkIndexA=li, physicsClientId=c.cid)
+                      if pt[2] != c.body and pt[8] < 0.002}
+            out.append(bodies)
+        return out
+
+    def _grab(self, name: str, body: int) -> None:
+        c = self._c
+        tool = c.links[c.info.tool_link]
+        T_tool = c.link_T(c.info.tool_link)
+        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=c.cid)
+        T_item = _mat(pos, orn)
+        rel = np.linalg.inv(T_tool) @ T_item
+        mass = p.getDynamicsInfo(body, -1, physicsClientId=c.cid)[0]
+        # offset along the fingers (tool x for both models' pad length axis)
+        along = abs(rel[0, 3]) if c.info.gripper_mode == "interbotix" else abs(rel[2, 3])
+        hold = self.friction * self._force
+        if along > self.slip_offset:
+            hold = 0.3 * mass * 9.81
+        pos7, quat7 = _pose7(rel)
+        self._cons = p.createConstraint(c.body, tool, body, -1, p.JOINT_FIXED, [0, 0, 0], pos7, [0, 0, 0],
+                                        parentFrameOrientation=quat7, physicsClientId=c.cid)
+        p.changeConstraint(self._cons, maxForce=hold, physicsClientId=c.cid)
+        self.held = name
+        c.held_body = body
+        self._hold_T = rel
+        self._held_since = c.clock.now()
+        self._slip_after = c.faults.slip_after(name)
+
+    def update(self, dt: float) -> None:
+        c = self._c
+        step = self._speed * dt
+        self._cmd = self._cmd + max(-step, min(step, self._target - self._cmd))
+        qs = c.info.width_to_q(self._cmd if not self.held else self._target)
+        p.setJointMotorControlArray(c.body, self._idx, p.POSITION_CONTROL, targetPositions=list(qs),
+                                    forces=[self._force / 2] * 2, positionGains=[0.5, 0.5], physicsClientId=c.cid)
+        if self.held is not None:
+            self._check_hold()
+        goal = self._goal
+        if goal is None or goal.done():
+            return
+        st = p.getJointStates(c.body, self._idx, physicsClientId=c.cid)
+        moving = abs(st[0][1]) + abs(st[1][1]) > 1e-3
+        width = c.info.q_to_width(st[0][0], st[1][0])
+        self._still = 0 if moving else self._still + 1
+        at_cmd_end = abs(self._cmd - self._target) < 1e-9
+        if abs(width - self._target) < 1e-3 and at_cmd_end and not moving:
+            self._grasp = GraspState.AT_POSITION
+            goal.succeed(self.state())
+            return
+        if self._still < max(3, int(0.05 * c.clock.hz)):
+            return
+        if self._closing and width > self._target + 1e-3 and (at_cmd_end or self._cmd < width - 2e-3):
+            left, right = self._contacts()
+            both = left & right
+            item = next((n for n, b in c.scene.items.items() if b in both), None)
+            if item is not None:
+                self._target = self._cmd = max(self.min_width, width - 0.004)  # keep squeezing
+                self._grab(item, c.scene.items[item])
+                self._grasp = GraspState.CONTACT_CLOSING
+            else:
+                self._grasp = GraspState.AT_POSITION
+                self._target = self._cmd = width
+            goal.succeed(self.state())
+        elif not self._closing and at_cmd_end:
+            self._grasp = GraspState.AT_POSITION
+            goal.succeed(self.state())
+
+    def _check_hold(self) -> None:
+        c = self._c
+        name = self.held
+        assert name is not None
+        body = c.scene.items[name]
+        now = c.clock.now()
+        if self._slip_after is not None and now - self._held_since >= self._slip_after:
+            c.faults.fired.append((now, f"grasp_slip {name}"))
+            self._release(GraspState.DROPPED)
+            return
+        pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=c.cid)
+        rel = np.linalg.inv(c.link_T(c.info.tool_link)) @ _mat(pos, orn)
+        assert self._hold_T is not None
+        if np.linalg.norm(rel[:3, 3] - self._hold_T[:3, 3]) > 0.015:
+            self._release(GraspState.DROPPED)
+
+
+def _pose7(T: np.ndarray) -> tuple[list[float], list[float]]:
+    from mmexec.sim.scene import quat_of
+
+    return T[:3, 3].tolist(), list(quat_of(T))
+
+
+# --------------------------------------------------------------------------- sensors
+
+
+@dataclass(frozen=True)
+class CameraNoise:
+    """Gaussian noise: ``rgb`` std [intensity levels 0-255]; ``depth`` std [m] at 1 m,
+    growing with the square of the distance (stereo-like)."""
+
+    rgb: float = 0.0
+    depth: float = 0.0
+
+
+class SimCamera(Camera):
+    """RGB-D camera rendered on demand with TinyRenderer (shadows off).
+
+    ``mount``: an extra ``T_link_optical`` correction applied to the model's optical
+    frame (wrist camera mount offset from the config); None = as modelled."""
+
+    def __init__(self, core: SimCore, intr: CameraIntrinsics, near: float, far: float, noise: CameraNoise,
+                 base: SimBase | None, mount: np.ndarray | None = None) -> None:
+        self._c = core
+        self._intr = intr
+        self.near, self.far = near, far
+        self._noise = noise
+        self._base = base
+        self._mount = mount if mount is not None else np.eye(4)
+        vfov = 2 * math.degrees(math.atan((intr.height / 2) / intr.fy))
+        self._proj = p.computeProjectionMatrixFOV(vfov, intr.width / intr.height, near, far, physicsClientId=core.cid)
+        self.frames = 0  #: rendered frame count (benchmarks)
+
+    @property
+    def intrinsics(self) -> CameraIntrinsics:
+        return self._intr
+
+    def pose_in_base(self) -> np.ndarray:
+        return self._c.in_base(self._c.info.camera_optical_link) @ self._mount
+
+    def set_pan_tilt(self, pan: float, tilt: float) -> None:
+        """Sim-only (LoCoBot): point the pan/tilt head [rad] (teleported, within limits)."""
+        for name, v in zip(self._c.info.pan_tilt_joints, (pan, tilt)):
+            j = self._c.joints[name]
+            lo, hi = p.getJointInfo(self._c.body, j, physicsClientId=self._c.cid)[8:10]
+            p.resetJointState(self._c.body, j, min(hi, max(lo, v)), physicsClientId=self._c.cid)
+            p.setJointMotorControl2(self._c.body, j, p.POSITION_CONTROL, targetPosition=min(hi, max(lo, v)),
+                                    force=2.0, physicsClientId=self._c.cid)
+
+    def render(self, T_map_opt: np.ndarray, width: int, height: int, proj: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """RGB (HxWx3 uint8) and z-buffer (HxW float) seen from an optical frame pose."""
+        T_gl = T_map_opt @ np.diag([1.0, -1.0, -1.0, 1.0])
+        view = np.linalg.inv(T_gl).T.reshape(-1).tolist()
+        _, _, rgba, zbuf, _ = p.getCameraImage(width, height, view, proj, renderer=p.ER_TINY_RENDERER, shadow=0,
+                                               flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self._c.cid)
+        rgb = np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
+        return np.ascontiguousarray(rgb), np.asarray(zbuf, dtype=np.float32).reshape(height, width)
+
+    def frame(self) -> CameraFrame | None:
+        c = self._c
+        now = c.clock.now()
+        if c.faults.camera_dropped(now):
+            return None
+        T_base_cam = self.pose_in_base()
+        T_map_opt = c.base_T() @ T_base_cam
+        rgb, z = self.render(T_map_opt, self._intr.width, self._intr.height, self._proj)
+        n, f = self.near, self.far
+        depth = (f * n / (f - (f - n) * z)).astype(np.float32)
+        depth[z >= 1.0 - 1e-7] = np.nan
+        if self._noise.depth > 0:
+            depth = depth + (self._noise.depth * depth * depth * c.rng.standard_normal(depth.shape)).astype(np.float32)
+        if self._noise.rgb > 0:
+            rgb = np.clip(rgb + c.rng.normal(0.0, self._noise.rgb, rgb.shape), 0, 255).astype(np.uint8)
+        self.frames += 1
+        est = self._base.state().pose.matrix() if self._base is not None else c.base_T()
+        return CameraFrame(rgb=rgb, depth=depth, intrinsics=self._intr, stamp=now, T_base_camera=T_base_cam, T_map_base=est)
+
+
+class SimLidar(Lidar):
+    """360 degree planar scan by ray casting (``rayTestBatch``, ``numThreads=0``) in the
+    lidar frame: ``beams`` rays from angle -pi CCW, ``range_min`` .. ``range_max`` [m],
+    Gaussian range ``noise`` std [m]; no return is ``inf``."""
+
+    def __init__(self, core: SimCore, beams: int, range_min: float, range_max: float, noise: float) -> None:
+        self._c = core
+        self.beams, self.range_min, self.range_max, self.noise = beams, range_min, range_max, noise
+        self._inc = 2 * math.pi / beams
+        ang = -math.pi + self._inc * np.arange(beams)
+        self._dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(beams)], axis=1)
+        self.scans = 0
+
+    def scan(self) -> LaserScan | None:
+        c = self._c
+        now = c.clock.now()
+        if c.faults.lidar_dropped(now):
+            return None
+        T = c.link_T(c.info.lidar_link)
+        d = self._dirs @ T[:3, :3].T
+        o = T[:3, 3]
+        starts = o + d * self.range_min
+        ends = o + d * self.range_max
+        hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=c.cid)
+        frac = np.array([h[2] if h[0] >= 0 else np.inf for h in hits])
+        ranges = self.range_min + frac * (self.range_max - self.range_min)
+        if self.noise > 0:
+            ranges = ranges + c.rng.normal(0.0, self.noise, ranges.shape)
+        self.scans += 1
+        return LaserScan(angle_min=-math.pi, angle_increment=self._inc, ranges=ranges.astype(np.float64),
+                         range_min=self.range_min, range_max=self.range_max, stamp=now,
+                         T_base_lidar=c.in_base(c.info.lidar_link))

@@ -1,0 +1,132 @@
+"""Spawns a :class:`~mmexec.sim.world.World` into a pybullet client.
+
+Static geometry (walls, shelves, tables, depot, obstacles, reflectors) becomes one
+fixed multibody, one link per part, so a single ``getClosestPoints`` call checks the
+robot against all of it. Items are dynamic boxes; each carries a textured quad (its
+marker) as a fixed massless-visual child link on its local +x face.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pybullet as p
+
+from mmexec.sim.markers import QUIET_RATIO, marker_texture_path
+from mmexec.sim.world import World
+
+__all__ = ["SceneHandles", "spawn_world", "quat_of", "yaw_of"]
+
+_COLORS = {
+    "wall": (0.85, 0.85, 0.8, 1.0),
+    "shelf": (0.55, 0.4, 0.25, 1.0),
+    "table": (0.45, 0.35, 0.3, 1.0),
+    "depot": (0.2, 0.5, 0.8, 1.0),
+    "obstacle": (0.8, 0.45, 0.2, 1.0),
+    "reflector": (0.95, 0.95, 0.95, 1.0),
+}
+
+
+@dataclass(frozen=True)
+class SceneHandles:
+    """Body ids in the pybullet client: ``static`` (all fixed parts; link i is
+    ``static_names[i]``), ``floor``, ``items`` by name."""
+
+    static: int
+    static_names: tuple[str, ...]
+    floor: int
+    items: Mapping[str, int]
+
+
+def quat_of(T: np.ndarray) -> tuple[float, float, float, float]:
+    """(x, y, z, w) quaternion of the rotation part of a 4x4 transform."""
+    R = T[:3, :3]
+    tr = R[0, 0] + R[1, 1] + R[2, 2]
+    if tr > 0:
+        s = math.sqrt(tr + 1.0) * 2
+        return ((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s)
+    i = int(np.argmax([R[0, 0], R[1, 1], R[2, 2]]))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    s = math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k]) * 2
+    q = [0.0, 0.0, 0.0, 0.0]
+    q[i] = 0.25 * s
+    q[j] = (R[j, i] + R[i, j]) / s
+    q[k] = (R[k, i] + R[i, k]) / s
+    q[3] = (R[k, j] - R[j, k]) / s
+    return (q[0], q[1], q[2], q[3])
+
+
+def yaw_of(T: np.ndarray) -> float:
+    return math.atan2(T[1, 0], T[0, 0])
+
+
+def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float, float]] | None = None,
+                texture_dir: Path | None = None) -> SceneHandles:
+    """Create the world's bodies in client ``cid``; ``marker_bias[item] = (lateral, up)``
+    [m] prints that item's marker shifted on its face (fault injection)."""
+    sx, sy = world.spec.room.size
+    floor_col = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
+    floor_vis = p.createVisualShape(p.GEOM_BOX, halfExtents=[sx / 2 + 0.2, sy / 2 + 0.2, 0.0005],
+                                    rgbaColor=[0.62, 0.62, 0.6, 1.0], physicsClientId=cid)
+    floor = p.createMultiBody(0, floor_col, -1, [0, 0, 0], physicsClientId=cid)
+    p.createMultiBody(0, -1, floor_vis, [sx / 2, sy / 2, -0.0005], physicsClientId=cid)
+    p.changeDynamics(floor, -1, lateralFriction=0.8, physicsClientId=cid)
+
+    cylinders = {o.name for o in world.obstacles if o.shape == "cylinder"} | {r.name for r in world.spec.reflectors}
+    names, cols, viss, poss, orns = [], [], [], [], []
+    for name, T, size, kind in world.static_boxes():
+        if name in cylinders:
+            r = size[0] / 2
+            col = p.createCollisionShape(p.GEOM_CYLINDER, radius=r, height=size[2], physicsClientId=cid)
+            vis = p.createVisualShape(p.GEOM_CYLINDER, radius=r, length=size[2], rgbaColor=_COLORS[kind], physicsClientId=cid)
+        else:
+            half = [s / 2 for s in size]
+            col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
+            vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=_COLORS[kind], physicsClientId=cid)
+        names.append(name)
+        cols.append(col)
+        viss.append(vis)
+        poss.append(T[:3, 3].tolist())
+        orns.append(quat_of(T))
+    n = len(names)
+    static = p.createMultiBody(
+        baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=-1, basePosition=[0, 0, 0],
+        linkMasses=[0] * n, linkCollisionShapeIndices=cols, linkVisualShapeIndices=viss,
+        linkPositions=poss, linkOrientations=orns, linkInertialFramePositions=[[0, 0, 0]] * n,
+        linkInertialFrameOrientations=[[0, 0, 0, 1]] * n, linkParentIndices=[0] * n,
+        linkJointTypes=[p.JOINT_FIXED] * n, linkJointAxis=[[0, 0, 1]] * n, physicsClientId=cid)
+    for i in range(-1, n):
+        p.changeDynamics(static, i, lateralFriction=0.8, physicsClientId=cid)
+
+    items: dict[str, int] = {}
+    bias = marker_bias or {}
+    for it in world.spec.items:
+        T = world.item_poses[it.name]
+        half = [s / 2 for s in it.size]
+        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=half, physicsClientId=cid)
+        vis = p.createVisualShape(p.GEOM_BOX, halfExtents=half, rgbaColor=[*it.color, 1.0], physicsClientId=cid)
+        s = it.marker_size * QUIET_RATIO / 2
+        # quad on the +x face, seen from +x: right = +y, up = +z; uv (0,0) bottom-left
+        verts = [[0, -s, -s], [0, s, -s], [0, s, s], [0, -s, s]]
+        quad = p.createVisualShape(p.GEOM_MESH, vertices=verts, indices=[0, 1, 2, 0, 2, 3],
+                                   uvs=[[0, 0], [1, 0], [1, 1], [0, 1]], normals=[[1, 0, 0]] * 4,
+                                   physicsClientId=cid)
+        dy, dz = bias.get(it.name, (0.0, 0.0))
+        body = p.createMultiBody(
+            baseMass=it.mass, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis,
+            basePosition=T[:3, 3].tolist(), baseOrientation=quat_of(T),
+            linkMasses=[0.0], linkCollisionShapeIndices=[-1], linkVisualShapeIndices=[quad],
+            linkPositions=[[half[0] + 0.0005, dy, dz]], linkOrientations=[[0, 0, 0, 1]],
+            linkInertialFramePositions=[[0, 0, 0]], linkInertialFrameOrientations=[[0, 0, 0, 1]],
+            linkParentIndices=[0], linkJointTypes=[p.JOINT_FIXED], linkJointAxis=[[0, 0, 1]],
+            physicsClientId=cid)
+        tex = p.loadTexture(str(marker_texture_path(it.marker, texture_dir)), physicsClientId=cid)
+        p.changeVisualShape(body, 0, textureUniqueId=tex, rgbaColor=[1, 1, 1, 1], physicsClientId=cid)
+        p.changeDynamics(body, -1, lateralFriction=0.8, spinningFriction=0.001, rollingFriction=0.0,
+                         physicsClientId=cid)
+        items[it.name] = body
+    return SceneHandles(static=static, static_names=tuple(names), floor=floor, items=items)

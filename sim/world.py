@@ -1,0 +1,465 @@
+"""World files: the schema, loading with located errors, randomisation, and the derived
+navigation map and planning scene.
+
+A world is YAML (see ``docs/worlds.md``) loaded through :mod:`mmexec.config.yamlload`
+into the frozen dataclasses below, so a mistake is reported as ``FILE:LINE:COL: path:
+message``. All poses are in ``map`` (the room frame: x east, y north, z up, metres,
+yaw in radians CCW from +x). The room spans ``[0, size[0]] x [0, size[1]]``.
+
+Shelf convention: a shelf's ``pose`` yaw is the direction its open front faces; its
+``width`` runs along the shelf's local y, ``depth`` along local x. An item placed on a
+shelf faces the same way, and its marker sits on the item's local +x face, so markers
+point into the room.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, did_you_mean, load_yaml
+from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, SceneBox
+
+__all__ = [
+    "Depot",
+    "Item",
+    "Obstacle",
+    "Randomize",
+    "Reflector",
+    "Room",
+    "Shelf",
+    "Table",
+    "World",
+    "WorldSpec",
+    "WORLDS_DIR",
+    "load_world",
+    "shipped_worlds",
+]
+
+WORLDS_DIR = Path(__file__).parent / "worlds"
+
+
+@dataclass(frozen=True)
+class Room:
+    """Rectangular room: inner ``size`` [m] (x, y), walls ``wall_height`` and ``wall_thickness`` [m]."""
+
+    size: tuple[float, float]
+    wall_height: float = 1.0
+    wall_thickness: float = 0.1
+
+    def validate(self) -> list[str]:
+        out = []
+        if min(self.size) <= 0.5:
+            out.append(f"room size {list(self.size)} too small (each side must exceed 0.5 m)")
+        if self.wall_height <= 0 or self.wall_thickness <= 0:
+            out.append("wall_height and wall_thickness must be > 0")
+        return out
+
+
+@dataclass(frozen=True)
+class Shelf:
+    """Open shelf: ``pose`` [x, y, yaw] of the footprint centre (yaw = facing direction),
+    ``width`` (along local y), ``depth`` (local x), ``height`` [m]; ``boards`` are the
+    heights [m] of the board tops above the floor; ``board_thickness`` [m]."""
+
+    name: str
+    pose: tuple[float, float, float]
+    width: float = 1.0
+    depth: float = 0.35
+    height: float = 0.8
+    boards: tuple[float, ...] = (0.25, 0.5)
+    board_thickness: float = 0.02
+
+    def validate(self) -> list[str]:
+        out = []
+        if min(self.width, self.depth, self.height, self.board_thickness) <= 0:
+            out.append(f"shelf {self.name!r}: width, depth, height and board_thickness must be > 0")
+        for h in self.boards:
+            if not self.board_thickness <= h <= self.height:
+                out.append(f"shelf {self.name!r}: board at {h} m outside [{self.board_thickness}, {self.height}]")
+        return out
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table: ``pose`` [x, y, yaw], ``size`` [x, y, height] (top surface at height) [m]."""
+
+    name: str
+    pose: tuple[float, float, float]
+    size: tuple[float, float, float] = (0.8, 0.6, 0.45)
+    top_thickness: float = 0.03
+
+
+@dataclass(frozen=True)
+class Item:
+    """A box carrying an ArUco DICT_4X4_50 marker on its local +x face.
+
+    Place it on a shelf (``shelf``, ``board`` index from 0 = lowest, ``offset`` [m] along
+    the shelf width from its centre, ``inset`` [m] from the shelf front to the item
+    front) or on a table (``table``, ``position`` [x, y] on the table top in ``map``),
+    or anywhere (``pose`` [x, y, z, yaw] of the box centre). ``size`` [m] full extents,
+    ``marker_size`` [m] side of the black square, ``mass`` [kg]."""
+
+    name: str
+    marker: int
+    size: tuple[float, float, float] = (0.06, 0.06, 0.06)
+    marker_size: float = 0.045
+    mass: float = 0.06
+    color: tuple[float, float, float] = (0.85, 0.85, 0.85)
+    shelf: str | None = None
+    board: int = 0
+    offset: float = 0.0
+    inset: float = 0.06
+    table: str | None = None
+    position: tuple[float, float] | None = None
+    pose: tuple[float, float, float, float] | None = None
+
+    def validate(self) -> list[str]:
+        out = []
+        if not 0 <= self.marker < 50:
+            out.append(f"item {self.name!r}: marker {self.marker} outside DICT_4X4_50 ids 0..49")
+        if self.marker_size * 8 / 6 > min(self.size[1], self.size[2]) + 1e-9:
+            out.append(f"item {self.name!r}: marker_size {self.marker_size} with its white border "
+                       f"({self.marker_size * 8 / 6:.3f} m) does not fit the {self.size[1]} x {self.size[2]} m face")
+        where = sum(x is not None for x in (self.shelf, self.table, self.pose))
+        if where != 1:
+            out.append(f"item {self.name!r}: give exactly one of shelf, table or pose")
+        if self.table is not None and self.position is None:
+            out.append(f"item {self.name!r}: an item on a table needs position [x, y]")
+        if self.mass <= 0 or min(self.size) <= 0:
+            out.append(f"item {self.name!r}: mass and size must be > 0")
+        return out
+
+
+@dataclass(frozen=True)
+class Depot:
+    """An open basket: ``pose`` [x, y, yaw], ``size`` [x, y, rim height], wall ``thickness`` [m]."""
+
+    name: str
+    pose: tuple[float, float, float]
+    size: tuple[float, float, float] = (0.4, 0.3, 0.15)
+    thickness: float = 0.01
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static ``box`` (``size`` [x, y, z]) or ``cylinder`` (``size`` [diameter, _, height])
+    at ``pose`` [x, y, yaw] standing on the floor."""
+
+    name: str
+    pose: tuple[float, float, float]
+    size: tuple[float, float, float]
+    shape: Literal["box", "cylinder"] = "box"
+
+
+@dataclass(frozen=True)
+class Reflector:
+    """A laser reflector post: ``position`` [x, y], ``radius`` and ``height`` [m]."""
+
+    name: str
+    position: tuple[float, float]
+    radius: float = 0.025
+    height: float = 1.0
+
+
+@dataclass(frozen=True)
+class Randomize:
+    """Uniform jitter half-ranges applied when the backend is asked to randomise:
+    items slide along their shelf/table by ``item_xy`` [m] and turn by ``item_yaw``
+    [rad]; the start pose moves by ``start_xy`` [m] and ``start_yaw`` [rad]; obstacles
+    move by ``obstacle_xy`` [m]."""
+
+    item_xy: float = 0.0
+    item_yaw: float = 0.0
+    start_xy: float = 0.0
+    start_yaw: float = 0.0
+    obstacle_xy: float = 0.0
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """A whole world file."""
+
+    name: str
+    room: Room
+    start: tuple[float, float, float] = (0.5, 0.5, 0.0)
+    shelves: tuple[Shelf, ...] = ()
+    tables: tuple[Table, ...] = ()
+    items: tuple[Item, ...] = ()
+    depots: tuple[Depot, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
+    reflectors: tuple[Reflector, ...] = ()
+    randomize: Randomize = field(default_factory=Randomize)
+    description: str = ""
+
+
+def _rot(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _T(x: float, y: float, z: float, yaw: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = _rot(yaw)
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+@dataclass(frozen=True)
+class World:
+    """A loaded world with concrete item, obstacle and start poses (after randomisation).
+
+    ``item_poses[name]`` is ``T_map_item`` (box centre, marker on the local +x face);
+    ``start`` is the robot's true start pose in ``map``.
+    """
+
+    spec: WorldSpec
+    source: str
+    item_poses: Mapping[str, np.ndarray]
+    obstacles: tuple[Obstacle, ...]
+    start: Pose2D
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    def item(self, name: str) -> Item:
+        for it in self.spec.items:
+            if it.name == name:
+                return it
+        raise KeyError(f"no item {name!r} in world {self.name!r} (items: {', '.join(self.item_names())})")
+
+    def item_names(self) -> tuple[str, ...]:
+        return tuple(it.name for it in self.spec.items)
+
+    def marker_of(self, name: str) -> int:
+        return self.item(name).marker
+
+    # ------------------------------------------------------------------ static geometry
+
+    def static_boxes(self) -> list[tuple[str, np.ndarray, tuple[float, float, float], str]]:
+        """Every static box as ``(name, T_map_box centre, full size, kind)``; kind is
+        ``wall``, ``shelf``, ``table``, ``depot``, ``obstacle`` or ``reflector``
+        (cylinders appear as their bounding box)."""
+        out: list[tuple[str, np.ndarray, tuple[float, float, float], str]] = []
+        r = self.spec.room
+        sx, sy = r.size
+        t, h = r.wall_thickness, r.wall_height
+        out += [
+            ("wall_south", _T(sx / 2, -t / 2, h / 2, 0), (sx + 2 * t, t, h), "wall"),
+            ("wall_north", _T(sx / 2, sy + t / 2, h / 2, 0), (sx + 2 * t, t, h), "wall"),
+            ("wall_west", _T(-t / 2, sy / 2, h / 2, 0), (t, sy, h), "wall"),
+            ("wall_east", _T(sx + t / 2, sy / 2, h / 2, 0), (t, sy, h), "wall"),
+        ]
+        for s in self.spec.shelves:
+            base = _T(s.pose[0], s.pose[1], 0.0, s.pose[2])
+            pt = 0.02  # side and back panel thickness
+            parts = [(f"{s.name}_side_l", (0.0, s.width / 2 - pt / 2, s.height / 2), (s.depth, pt, s.height)),
+                     (f"{s.name}_side_r", (0.0, -s.width / 2 + pt / 2, s.height / 2), (s.depth, pt, s.height)),
+                     (f"{s.name}_back", (-s.depth / 2 + pt / 2, 0.0, s.height / 2), (pt, s.width, s.height)),
+                     (f"{s.name}_top", (0.0, 0.0, s.height - s.board_thickness / 2), (s.depth, s.width, s.board_thickness))]
+            for i, bh in enumerate(s.boards):
+                parts.append((f"{s.name}_board{i}", (0.0, 0.0, bh - s.board_thickness / 2),
+                              (s.depth, s.width - 2 * pt, s.board_thickness)))
+            for name, xyz, size in parts:
+                out.append((name, base @ _T(*xyz, 0.0), size, "shelf"))
+        for tb in self.spec.tables:
+            lx, ly, th = tb.size
+            base = _T(tb.pose[0], tb.pose[1], 0.0, tb.pose[2])
+            out.append((f"{tb.name}_top", base @ _T(0, 0, th - tb.top_thickness / 2, 0), (lx, ly, tb.top_thickness), "table"))
+            for i, (a, b) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
+                out.append((f"{tb.name}_leg{i}", base @ _T(a * (lx / 2 - 0.03), b * (ly / 2 - 0.03), (th - tb.top_thickness) / 2, 0),
+                            (0.04, 0.04, th - tb.top_thickness), "table"))
+        for d in self.spec.depots:
+            lx, ly, hh = d.size
+            w = d.thickness
+            base = _T(d.pose[0], d.pose[1], 0.0, d.pose[2])
+            for name, xyz, size in ((f"{d.name}_floor", (0, 0, w / 2), (lx, ly, w)),
+                                    (f"{d.name}_wall_px", (lx / 2 - w / 2, 0, hh / 2), (w, ly, hh)),
+                                    (f"{d.name}_wall_nx", (-lx / 2 + w / 2, 0, hh / 2), (w, ly, hh)),
+                                    (f"{d.name}_wall_py", (0, ly / 2 - w / 2, hh / 2), (lx - 2 * w, w, hh)),
+                                    (f"{d.name}_wall_ny", (0, -ly / 2 + w / 2, hh / 2), (lx - 2 * w, w, hh))):
+                out.append((name, base @ _T(*xyz, 0.0), size, "depot"))
+        for o in self.obstacles:
+            size = o.size if o.shape == "box" else (o.size[0], o.size[0], o.size[2])
+            out.append((o.name, _T(o.pose[0], o.pose[1], o.size[2] / 2, o.pose[2]), size, "obstacle"))
+        for rf in self.spec.reflectors:
+            out.append((rf.name, _T(rf.position[0], rf.position[1], rf.height / 2, 0.0),
+                        (2 * rf.radius, 2 * rf.radius, rf.height), "reflector"))
+        return out
+
+    def scene_boxes(self) -> tuple[SceneBox, ...]:
+        """Static boxes for arm planning (walls, shelf boards and panels, tables, depot
+        walls, obstacles), ``pose`` = ``T_map_box`` centre, ``size`` full extents [m]."""
+        return tuple(SceneBox(n, T, s) for n, T, s, _ in self.static_boxes())
+
+    def occupancy(self, resolution: float = 0.05) -> OccupancyGrid:
+        """A map_server-style grid in ``map``: 100 where a wall, shelf, table, depot,
+        obstacle or reflector footprint covers the cell centre, 0 elsewhere inside the
+        room. The grid covers the room plus its walls; ``origin`` is its lower-left corner."""
+        if resolution <= 0:
+            raise ValueError(f"resolution must be > 0, got {resolution}")
+        r = self.spec.room
+        t = r.wall_thickness
+        ox, oy = -t, -t
+        w = int(math.ceil((r.size[0] + 2 * t) / resolution))
+        h = int(math.ceil((r.size[1] + 2 * t) / resolution))
+        xs = ox + (np.arange(w) + 0.5) * resolution
+        ys = oy + (np.arange(h) + 0.5) * resolution
+        X, Y = np.meshgrid(xs, ys)
+        data = np.zeros((h, w), dtype=np.int8)
+        data[(X < 0) | (Y < 0) | (X > r.size[0]) | (Y > r.size[1])] = 100
+        for _, T, size, kind in self.static_boxes():
+            if T[2, 3] - size[2] / 2 > 0.5:  # floats above anything the base can hit
+                continue
+            dx, dy = X - T[0, 3], Y - T[1, 3]
+            lx = T[0, 0] * dx + T[1, 0] * dy
+            ly = T[0, 1] * dx + T[1, 1] * dy
+            inside = (np.abs(lx) <= size[0] / 2 + resolution / 2) & (np.abs(ly) <= size[1] / 2 + resolution / 2)
+            data[inside] = 100
+        return OccupancyGrid(data=data, resolution=resolution, origin=Pose2D(ox, oy, 0.0))
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def shipped_worlds() -> tuple[str, ...]:
+    """Names of the worlds shipped in ``sim/worlds``."""
+    return tuple(sorted(p.stem for p in WORLDS_DIR.glob("*.yaml")))
+
+
+def _resolve(name_or_path: str | Path, mark: Mark | None) -> Path:
+    s = str(name_or_path)
+    if "/" in s or s.endswith((".yaml", ".yml")):
+        return Path(s)
+    p = WORLDS_DIR / f"{s}.yaml"
+    if not p.exists():
+        known = shipped_worlds()
+        msg = f"unknown world {s!r} (shipped: {', '.join(known)}; or give a path to a .yaml file)" + did_you_mean(s, known)
+        raise InputError.at(mark or Mark("<world>", 1, 1), msg)
+    return p
+
+
+def load_world(
+    name_or_path: str | Path,
+    *,
+    seed: int | None = None,
+    randomize: bool = False,
+    mark: Mark | None = None,
+    extra_obstacles: tuple[Obstacle, ...] = (),
+) -> World:
+    """Load a shipped world by name (``"lab"``) or a world file by path, check it, and
+    place items, obstacles and the start pose (jittered from ``seed`` when
+    ``randomize``). ``mark`` locates ``name_or_path`` in a config for the error when the
+    name is unknown. Raises :class:`InputError` naming ``FILE:LINE:COL`` on any problem."""
+    path = _resolve(name_or_path, mark)
+    raw = load_yaml(path)
+    problems = Problems()
+    file_mark = Mark(str(path), 1, 1)
+    if not isinstance(raw, dict):
+        raise InputError.at(mark_of_raw(raw, file_mark), "a world file must be a mapping (name, room, shelves, items, ...)")
+    spec = bind(WorldSpec, raw, getattr(raw, "mark", file_mark), "", problems)
+    problems.raise_if_any()
+    assert isinstance(spec, WorldSpec)
+    _cross_check(spec, raw, problems)
+    problems.raise_if_any()
+    rng = np.random.default_rng(seed)
+    rz = spec.randomize if randomize else Randomize()
+    item_poses = {it.name: _place_item(spec, it, rng, rz) for it in spec.items}
+    obstacles = tuple(
+        replace(o, pose=(o.pose[0] + rng.uniform(-rz.obstacle_xy, rz.obstacle_xy),
+                         o.pose[1] + rng.uniform(-rz.obstacle_xy, rz.obstacle_xy), o.pose[2]))
+        for o in spec.obstacles
+    ) + tuple(extra_obstacles)
+    sx, sy, syaw = spec.start
+    start = Pose2D(sx + rng.uniform(-rz.start_xy, rz.start_xy), sy + rng.uniform(-rz.start_xy, rz.start_xy),
+                   _wrap(syaw + rng.uniform(-rz.start_yaw, rz.start_yaw)))
+    return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start)
+
+
+def mark_of_raw(raw: Any, default: Mark) -> Mark:
+    return getattr(raw, "mark", default)
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _list_marks(raw: YDict, key: str) -> list[Mark]:
+    seq = raw.get(key)
+    if isinstance(seq, list):
+        return [getattr(v, "mark", seq.item_mark(i)) for i, v in enumerate(seq)]  # type: ignore[attr-defined]
+    return []
+
+
+def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
+    """Names unique, references resolve, items fit their shelves, everything in the room."""
+    seen: dict[str, str] = {}
+    sx, sy = spec.room.size
+    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors"):
+        marks = _list_marks(raw, key)
+        for i, obj in enumerate(getattr(spec, key)):
+            m = marks[i] if i < len(marks) else raw.mark
+            if obj.name in seen:
+                problems.add(m, f"{key}[{i}].name: {obj.name!r} already names a {seen[obj.name]}")
+            seen[obj.name] = key.rstrip("s")
+            xy = getattr(obj, "pose", None) or getattr(obj, "position", None)
+            if xy is not None and not (0 <= xy[0] <= sx and 0 <= xy[1] <= sy):
+                problems.add(m, f"{key}[{i}]: {obj.name!r} at ({xy[0]}, {xy[1]}) is outside the {sx} x {sy} m room")
+    markers: dict[int, str] = {}
+    shelves = {s.name: s for s in spec.shelves}
+    tables = {t.name: t for t in spec.tables}
+    for i, (it, m) in enumerate(zip(spec.items, _list_marks(raw, "items"))):
+        item_raw = raw["items"][i]
+        if it.marker in markers:
+            problems.add(item_raw.value_mark("marker"), f"items[{i}].marker: id {it.marker} already used by {markers[it.marker]!r}")
+        markers[it.marker] = it.name
+        if it.shelf is not None:
+            s = shelves.get(it.shelf)
+            if s is None:
+                problems.add(item_raw.value_mark("shelf"), f"items[{i}].shelf: no shelf {it.shelf!r}"
+                             + (did_you_mean(it.shelf, shelves) or f" (shelves: {', '.join(shelves) or 'none'})"))
+                continue
+            if not 0 <= it.board < len(s.boards):
+                problems.add(item_raw.value_mark("board") if "board" in item_raw else m,
+                             f"items[{i}].board: shelf {s.name!r} has boards 0..{len(s.boards) - 1}, got {it.board}")
+                continue
+            if abs(it.offset) + it.size[1] / 2 > s.width / 2 - 0.02:
+                problems.add(item_raw.value_mark("offset") if "offset" in item_raw else m,
+                             f"items[{i}].offset: {it.offset} m puts {it.name!r} outside shelf {s.name!r} (width {s.width} m)")
+            if it.inset + it.size[0] > s.depth:
+                problems.add(item_raw.value_mark("inset") if "inset" in item_raw else m,
+                             f"items[{i}].inset: {it.name!r} does not fit the {s.depth} m deep shelf")
+            room_above = (s.boards[it.board + 1] - s.board_thickness if it.board + 1 < len(s.boards)
+                          else s.height - s.board_thickness) - s.boards[it.board]
+            if it.size[2] > room_above:
+                problems.add(m, f"items[{i}]: {it.name!r} ({it.size[2]} m tall) does not fit under the next board "
+                                f"({room_above:.3f} m free)")
+        if it.table is not None and it.table not in tables:
+            problems.add(item_raw.value_mark("table"), f"items[{i}].table: no table {it.table!r}"
+                         + (did_you_mean(it.table, tables) or f" (tables: {', '.join(tables) or 'none'})"))
+    st = spec.start
+    if not (0 < st[0] < sx and 0 < st[1] < sy):
+        problems.add(raw.value_mark("start"), f"start: ({st[0]}, {st[1]}) is outside the {sx} x {sy} m room")
+
+
+def _place_item(spec: WorldSpec, it: Item, rng: np.random.Generator, rz: Randomize) -> np.ndarray:
+    jx = rng.uniform(-rz.item_xy, rz.item_xy)
+    jyaw = rng.uniform(-rz.item_yaw, rz.item_yaw)
+    if it.pose is not None:
+        x, y, z, yaw = it.pose
+        return _T(x + jx, y, z, yaw + jyaw)
+    if it.table is not None and it.position is not None:
+        tb = next(t for t in spec.tables if t.name == it.table)
+        return _T(it.position[0] + jx, it.position[1], tb.size[2] + it.size[2] / 2 + 1e-3, tb.pose[2] + jyaw)
+    s = next(sh for sh in spec.shelves if sh.name == it.shelf)
+    lim = s.width / 2 - 0.02 - it.size[1] / 2
+    off = float(np.clip(it.offset + jx, -lim, lim))
+    local_x = s.depth / 2 - it.inset - it.size[0] / 2
+    z = s.boards[it.board] + it.size[2] / 2 + 1e-3
+    return _T(s.pose[0], s.pose[1], 0.0, s.pose[2]) @ _T(local_x, off, z, jyaw)
