@@ -1,0 +1,422 @@
+"""Compile mission YAML into py_trees trees, in two phases (BehaviorTree.CPP style).
+
+Public API (used by the runner and the CLI)::
+
+    mission = load_mission(path, registry=REGISTRY)      # parse + validate, or InputError
+    mission.path, mission.name, mission.files, mission.sha256
+    mission.params            # name -> ParamDecl (type, default, has_default, doc)
+    mission.request_fields    # name -> type
+    request = mission.validate_request({"item": "3"})    # -> {"item": 3}, or ValueError
+    tree = mission.instantiate(ctx, request, params=None) # a fresh MissionTree
+
+:func:`load_mission` reads every file (the mission and what it includes), validates
+everything and collects every problem into one
+:class:`~mmexec.config.yamlload.InputError` (``FILE:LINE:COL: message`` per line). It
+builds no py_trees objects. :meth:`Mission.instantiate` builds a fresh tree for one
+request; :class:`MissionTree` ticks it without ever blocking and implements the halt
+contract of docs/missions.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from py_trees.common import Status
+
+from mmexec.config.yamlload import InputError, Mark, Problems, did_you_mean, load_yaml_bytes, load_yaml_text
+from mmexec.executive import nodes as N
+from mmexec.executive.context import ExecContext
+from mmexec.executive.schema import FAILURE_KEYS, TYPE_NAMES, FileSpec, NodeSpec, ParamDecl, parse_file
+from mmexec.executive.values import Const, Expr, substitute
+from mmexec.skills.base import REGISTRY, SkillRegistry
+
+__all__ = ["MAX_INCLUDE_DEPTH", "MAX_TREE_NODES", "Mission", "MissionTree", "convert_value", "load_mission"]
+
+log = logging.getLogger(__name__)
+
+#: how deep includes may nest (a file including a file including ...)
+MAX_INCLUDE_DEPTH = 16
+#: most nodes a mission may have once includes are expanded
+MAX_TREE_NODES = 50_000
+
+
+def convert_value(tp: type, value: Any, what: str) -> Any:
+    """Convert ``value`` (a typed value, or a command-line string like ``"3"``) to
+    declared type ``tp``. Raises ValueError with a one-line message."""
+    if isinstance(value, str) and tp is not str:
+        text = value.strip()
+        try:
+            if tp is int:
+                return int(text)
+            if tp is float:
+                return float(text)
+            if tp is bool:
+                low = text.lower()
+                if low in ("true", "yes", "on", "1"):
+                    return True
+                if low in ("false", "no", "off", "0"):
+                    return False
+                raise ValueError(text)
+            if tp in (list, dict):
+                try:
+                    parsed = load_yaml_text(text, what)
+                except InputError as e:
+                    raise ValueError(str(e).splitlines()[0]) from None
+                if isinstance(parsed, tp):
+                    return tp(parsed)
+                raise ValueError(text)
+        except ValueError:
+            raise ValueError(f"{what}: expected {tp.__name__}, got {value!r}") from None
+    if tp is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if tp in (int, float) and isinstance(value, bool):
+        raise ValueError(f"{what}: expected {tp.__name__}, got {value!r}")
+    if not isinstance(value, tp):
+        raise ValueError(f"{what}: expected {tp.__name__}, got {value!r}")
+    return value
+
+
+@dataclass
+class Mission:
+    """A validated mission: everything needed to build trees, and nothing built yet."""
+
+    path: Path
+    name: str
+    description: str
+    files: list[Path]
+    sha256: str
+    params: dict[str, ParamDecl]
+    request_fields: dict[str, type]
+    root_file: FileSpec
+    registry: SkillRegistry
+    node_count: int = 0
+    _hashes: dict[Path, str] = field(default_factory=dict, repr=False)
+
+    def validate_request(self, request: Mapping[str, Any]) -> dict[str, Any]:
+        """Check a request against the declared fields and convert CLI strings ("3")
+        to the declared types. Raises ValueError (one line) on unknown, missing or
+        wrongly typed fields."""
+        out: dict[str, Any] = {}
+        for k in request:
+            if k not in self.request_fields:
+                known = ", ".join(self.request_fields) or "none"
+                raise ValueError(f"request: unknown field {k!r}{did_you_mean(k, self.request_fields)} (mission {self.name} takes: {known})")
+        for k, tp in self.request_fields.items():
+            if k not in request:
+                raise ValueError(f"request: missing field {k!r} ({tp.__name__})")
+            out[k] = convert_value(tp, request[k], f"request field {k!r}")
+        return out
+
+    def resolve_params(self, params: Mapping[str, Any] | None) -> dict[str, Any]:
+        """Declared defaults overridden by ``params`` (CLI strings converted). ValueError."""
+        params = params or {}
+        for k in params:
+            if k not in self.params:
+                raise ValueError(f"params: unknown parameter {k!r}{did_you_mean(k, self.params)} (mission {self.name} declares: {', '.join(self.params) or 'none'})")
+        out: dict[str, Any] = {}
+        for k, d in self.params.items():
+            if k in params:
+                out[k] = convert_value(d.type, params[k], f"parameter {k!r}")
+            elif d.has_default:
+                out[k] = d.default
+            else:
+                raise ValueError(f"params: missing required parameter {k!r} ({d.type.__name__})")
+        return out
+
+    def instantiate(
+        self, ctx: ExecContext | None, request: Mapping[str, Any], params: Mapping[str, Any] | None = None
+    ) -> MissionTree:
+        """Build a fresh tree for one request. ``ctx`` None builds a tree for display
+        only (it cannot be ticked). Raises ValueError on a bad request or parameter."""
+        req = self.validate_request(request)
+        values = self.resolve_params(params)
+        rt = N.Runtime(ctx)
+        for k, v in req.items():
+            rt.bb[f"request.{k}"] = v
+        env: dict[str, Expr] = {k: Const(v) for k, v in values.items()}
+        assert self.root_file.tree is not None
+        root = _Builder(rt, self.registry).build(self.root_file.tree, env, "", self.root_file.tree.name or self.name)
+        return MissionTree(root, rt, self)
+
+    def display_tree(self) -> MissionTree:
+        """A tree for rendering only: placeholder request, default parameters."""
+        req = {k: _placeholder(tp) for k, tp in self.request_fields.items()}
+        params = {k: _placeholder(d.type) for k, d in self.params.items() if not d.has_default}
+        return self.instantiate(None, req, params)
+
+
+def _placeholder(tp: type) -> Any:
+    return {int: 0, float: 0.0, str: "", bool: False, list: [], dict: {}}[tp]
+
+
+class MissionTree:
+    """One instantiated mission tree, ticked by the runner.
+
+    ``tick()`` runs one tick and never blocks. ``request_halt()`` starts a multi-tick
+    halt of the whole tree: each following ``tick()`` advances the stop and returns
+    RUNNING until every skill has stopped, then INVALID (``stopped`` becomes true).
+    """
+
+    def __init__(self, root: Any, rt: N.Runtime, mission: Mission) -> None:
+        self.root = root
+        self.rt = rt
+        self.mission = mission
+        self.halting = False
+        self.stopped = False
+
+    @property
+    def status(self) -> Status:
+        """The root's status (RUNNING while a halt is in progress, INVALID once stopped)."""
+        return self.root.status  # type: ignore[no-any-return]
+
+    def tick(self) -> Status:
+        """One tick. Raises :class:`~mmexec.executive.nodes.NodeError` when an
+        exception escaped a skill (the message names the node path)."""
+        if self.stopped:
+            return Status.INVALID
+        if self.halting:
+            if self.root.halt():
+                self.stopped = True
+                return Status.INVALID
+            return Status.RUNNING
+        return self.root.step()  # type: ignore[no-any-return]
+
+    def request_halt(self) -> None:
+        """Begin halting the whole tree (every running skill is cancelled exactly once)."""
+        if not self.halting:
+            self.halting = True
+            if self.root.status is not Status.RUNNING:
+                self.root.halt()
+                self.stopped = True
+
+    def tip_path(self) -> str:
+        """Path of the deepest RUNNING node ("" when nothing runs)."""
+        tip = N._tip(self.root)
+        return "" if tip is None else tip.path  # type: ignore[no-any-return]
+
+    def nodes(self) -> list[Any]:
+        """Every node, depth-first pre-order."""
+        out: list[Any] = []
+        stack = [self.root]
+        while stack:
+            n = stack.pop()
+            out.append(n)
+            stack.extend(reversed(n.children))
+        return out
+
+    def snapshot(self) -> list[tuple[str, str]]:
+        """(node path, status name) for every node, pre-order (for replay)."""
+        return [(n.path, n.status.name) for n in self.nodes()]
+
+    def add_status_listener(self, fn: Callable[[str, str, str], None]) -> None:
+        """Call ``fn(path, old, new)`` (status names) on every node status change."""
+        self.rt.listeners.append(fn)
+
+    def blackboard(self) -> dict[str, Any]:
+        """A copy of the blackboard (key -> value)."""
+        return dict(self.rt.bb)
+
+
+class _Builder:
+    def __init__(self, rt: N.Runtime, registry: SkillRegistry) -> None:
+        self.rt = rt
+        self.registry = registry
+
+    def build(self, spec: NodeSpec, env: Mapping[str, Expr], parent: str, name: str | None = None) -> Any:
+        rt = self.rt
+        kind = spec.kind
+        nm = name or spec.name or self.default_name(spec)
+        path = f"{parent}/{nm}" if parent else nm
+        o = spec.opts
+        if kind in ("sequence", "fallback", "parallel", "recovery"):
+            kids = self.build_children(spec.children, env, path)
+            if kind == "sequence":
+                return N.Sequence(rt, path, nm, kids, reactive=o["reactive"])
+            if kind == "fallback":
+                return N.Fallback(rt, path, nm, kids, reactive=o["reactive"])
+            if kind == "parallel":
+                return N.Parallel(rt, path, nm, kids, threshold=min(o["threshold"], len(kids)))
+            give_up = kids[2] if o["has_give_up"] else None
+            return N.Recovery(rt, path, nm, kids[0], kids[1], give_up, o["max_recoveries"])
+        if kind == "include":
+            sub: FileSpec = o["file"]
+            sub_env: dict[str, Expr] = {}
+            for pname, d in sub.params.items():
+                if pname in o["bindings"]:
+                    sub_env[pname] = substitute(o["bindings"][pname], env)
+                else:
+                    sub_env[pname] = Const(d.default)
+            assert sub.tree is not None
+            child = self.build(sub.tree, sub_env, path)
+            return N.Subtree(rt, path, nm, child)
+        if kind in ("retry", "timeout", "repeat", "invert", "force_success", "force_failure"):
+            child = self.build(spec.children[0], env, path)
+            if kind == "retry":
+                return N.Retry(rt, path, nm, child, o["attempts"])
+            if kind == "timeout":
+                return N.Timeout(rt, path, nm, child, substitute(o["seconds"], env))
+            if kind == "repeat":
+                return N.Repeat(rt, path, nm, child, o["times"])
+            cls = {"invert": N.Invert, "force_success": N.ForceSuccess, "force_failure": N.ForceFailure}[kind]
+            return cls(rt, path, nm, child)
+        if kind == "condition":
+            return N.Condition(rt, path, nm, o["key"], o["op"], substitute(o["value"], env))
+        if kind == "wait":
+            return N.Wait(rt, path, nm, substitute(o["seconds"], env))
+        # skill
+        params = {k: substitute(v, env) for k, v in o["params"].items()}
+        return N.SkillLeaf(rt, path, nm, o["skill"], params, o["outputs"])
+
+    @staticmethod
+    def default_name(spec: NodeSpec) -> str:
+        if spec.kind == "skill" and spec.opts.get("skill") is not None:
+            return spec.opts["skill"].name  # type: ignore[no-any-return]
+        return spec.kind
+
+    def build_children(self, specs: list[NodeSpec], env: Mapping[str, Expr], path: str) -> list[Any]:
+        seen: dict[str, int] = {}
+        out = []
+        for s in specs:
+            nm = s.name or self.default_name(s)
+            k = seen.get(nm, 0) + 1
+            seen[nm] = k
+            out.append(self.build(s, env, path, nm if k == 1 else f"{nm}#{k}"))
+        return out
+
+
+class _Loader:
+    """Reads files, resolves includes (cached, cycle- and depth-checked)."""
+
+    def __init__(self, registry: SkillRegistry, problems: Problems) -> None:
+        self.registry = registry
+        self.p = problems
+        self.files: dict[Path, FileSpec | None] = {}
+        self.hashes: dict[Path, str] = {}
+        self.order: list[Path] = []
+        self.stack: list[Path] = []
+        self.display: dict[Path, str] = {}
+
+    def load(self, path: Path, display: str, mark: Mark | None) -> FileSpec | None:
+        key = path.resolve()
+        if key in self.stack:
+            chain = " -> ".join(self.display[p] for p in self.stack[self.stack.index(key):]) + f" -> {display}"
+            assert mark is not None
+            self.p.add(mark, f"include cycle: {chain}")
+            return None
+        if key in self.files:
+            return self.files[key]
+        if len(self.stack) > MAX_INCLUDE_DEPTH:
+            assert mark is not None
+            self.p.add(mark, f"includes nest deeper than {MAX_INCLUDE_DEPTH} files")
+            return None
+        try:
+            if not key.is_file():
+                where = mark or Mark(display, 1, 1)
+                self.p.add(where, f"include {display!r}: no such file" if mark else "no such file")
+                self.files[key] = None
+                return None
+            data = key.read_bytes()
+        except OSError as e:
+            self.p.add(mark or Mark(display, 1, 1), f"cannot read {display}: {e.strerror or e}")
+            self.files[key] = None
+            return None
+        self.display[key] = display
+        self.hashes[key] = hashlib.sha256(data).hexdigest()
+        self.order.append(key)
+        try:
+            doc = load_yaml_bytes(data, display)
+        except InputError as e:
+            self.p.extend(e.problems)
+            self.files[key] = None
+            return None
+        self.stack.append(key)
+        try:
+            spec = parse_file(doc, key, display, self.p, self.registry,
+                              lambda rel, m, node: self.include(key, display, rel, m))
+        finally:
+            self.stack.pop()
+        self.files[key] = spec
+        return spec
+
+    def include(self, base: Path, base_display: str, rel: str, mark: Mark) -> FileSpec | None:
+        target = (base.parent / rel)
+        shown = str(Path(base_display).parent / rel)
+        return self.load(target, shown, mark)
+
+
+def _count(spec: NodeSpec, memo: dict[int, int]) -> int:
+    key = id(spec)
+    if key in memo:
+        return memo[key]
+    total = 1 + sum(_count(c, memo) for c in spec.children)
+    if spec.kind == "include":
+        sub = spec.opts.get("file")
+        if sub is not None and sub.tree is not None:
+            total += _count(sub.tree, memo)
+    memo[key] = min(total, 1 << 40)
+    return memo[key]
+
+
+def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY) -> Mission:
+    """Parse and validate a mission and every file it includes. Raises InputError
+    listing every problem (``FILE:LINE:COL: message``)."""
+    problems = Problems()
+    loader = _Loader(registry, problems)
+    p = Path(path)
+    top = loader.load(p, str(path), None)
+    if top is None or top.tree is None:
+        problems.raise_if_any()
+        raise InputError.at(Mark(str(path), 1, 1), "mission has no tree")
+    specs = [s for s in loader.files.values() if s is not None]
+    # every blackboard key read must be written by something in the mission
+    writes: dict[str, type | None] = dict(FAILURE_KEYS)
+    for s in specs:
+        writes.update(s.writes)
+    for r, d in top.requests.items():
+        writes[f"request.{r}"] = d.type
+    known = sorted(set(writes) | {k for s in specs for k in s.params})
+    for s in specs:
+        for key, mark in s.reads:
+            if key not in writes:
+                hint = did_you_mean(key, known)
+                if key.startswith("request."):
+                    fields = ", ".join(top.requests) or "none"
+                    msg = f"unknown request field {key[8:]!r}{did_you_mean(key[8:], top.requests)} (the mission declares: {fields})"
+                else:
+                    msg = f"blackboard key {key!r} is read but nothing writes it{hint or ''} (a skill output, request.<field>, a parameter, or recovery bookkeeping)"
+                problems.add(mark, msg)
+        if s is not top:
+            for r, d in s.requests.items():
+                if r not in top.requests:
+                    problems.add(d.mark or s.mark, f"request field {r!r} is needed by {s.path.name} but not declared by the mission {top.name}")
+                elif top.requests[r].type is not d.type:
+                    problems.add(d.mark or s.mark, f"request field {r!r} is {d.type.__name__} here but {top.requests[r].type.__name__} in the mission {top.name}")
+    n = _count(top.tree, {})
+    if n > MAX_TREE_NODES:
+        problems.add(top.tree.mark, f"mission has {n} nodes once includes are expanded, more than {MAX_TREE_NODES}")
+    problems.raise_if_any()
+    h = hashlib.sha256()
+    for f in loader.order:
+        h.update(loader.hashes[f].encode())
+    return Mission(
+        path=p,
+        name=top.name,
+        description=top.description,
+        files=list(loader.order),
+        sha256=h.hexdigest(),
+        params=dict(top.params),
+        request_fields={k: d.type for k, d in top.requests.items()},
+        root_file=top,
+        registry=registry,
+        node_count=n,
+        _hashes={f: loader.hashes[f] for f in loader.order},
+    )
+
+
+# keep the name list of declared types importable for docs/CLI help
+DECLARED_TYPES = tuple(TYPE_NAMES)

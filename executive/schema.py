@@ -1,0 +1,626 @@
+"""Mission file schema: parse and validate loaded YAML into node specs (no py_trees).
+
+:func:`parse_file` turns one file's loaded YAML (from
+:func:`mmexec.config.yamlload.load_yaml_bytes`) into a :class:`FileSpec`, recording
+every problem with its ``FILE:LINE:COL`` in a shared
+:class:`~mmexec.config.yamlload.Problems`. Includes are resolved through a callback so
+the compiler controls file reading, caching, cycle and depth checks. The language is
+documented in docs/missions.md.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mmexec.config.yamlload import Mark, Problems, YDict, YList, did_you_mean
+from mmexec.executive.nodes import OPS
+from mmexec.executive.values import (
+    KEY_RE,
+    Const,
+    Expr,
+    ParamRef,
+    Ref,
+    Template,
+    ValueSyntaxError,
+    parse_value,
+)
+from mmexec.skills.base import Param, SkillRegistry, SkillSpec
+
+__all__ = [
+    "COMPOSITES",
+    "DECORATORS",
+    "FileSpec",
+    "NODE_TYPES",
+    "NodeSpec",
+    "ParamDecl",
+    "TYPE_NAMES",
+    "parse_file",
+]
+
+COMPOSITES = ("sequence", "fallback", "parallel")
+DECORATORS = ("retry", "timeout", "repeat", "invert", "force_success", "force_failure")
+LEAVES = ("condition", "wait", "skill")
+NODE_TYPES = COMPOSITES + DECORATORS + LEAVES + ("include", "recovery")
+
+#: options each node type accepts besides its type key and ``name``
+OPTIONS: dict[str, tuple[str, ...]] = {
+    "sequence": ("reactive",),
+    "fallback": ("reactive",),
+    "parallel": ("policy",),
+    "retry": ("attempts",),
+    "timeout": ("seconds",),
+    "repeat": ("times", "until_failure"),
+    "invert": (),
+    "force_success": (),
+    "force_failure": (),
+    "condition": ("op", "value"),
+    "wait": (),
+    "skill": ("params", "outputs"),
+    "include": ("params",),
+    "recovery": (),
+}
+RECOVERY_KEYS = ("action", "recovery", "max_recoveries", "give_up")
+TOP_KEYS = ("mission", "description", "params", "requests", "tree")
+DECL_KEYS = ("type", "default", "doc")
+TYPE_NAMES: dict[str, type] = {"int": int, "float": float, "str": str, "bool": bool, "list": list, "dict": dict}
+NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_\-]*")
+#: recovery bookkeeping key suffixes
+RECOVERY_SUFFIXES = ("attempts", "recoveries", "last_failure", "outcome")
+FAILURE_KEYS = {"last_failure": str, "last_failure_kind": str, "last_failure_node": str}
+
+
+@dataclass
+class ParamDecl:
+    """A declared mission parameter or request field."""
+
+    name: str
+    type: type
+    default: Any = None
+    has_default: bool = False
+    doc: str = ""
+    mark: Mark | None = None
+
+
+@dataclass
+class NodeSpec:
+    """One validated node. ``kind`` is a NODE_TYPES entry; ``opts`` holds the parsed
+    options (see the compiler for each kind's keys)."""
+
+    kind: str
+    mark: Mark
+    name: str | None = None
+    children: list[NodeSpec] = field(default_factory=list)
+    opts: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class FileSpec:
+    """One parsed mission file."""
+
+    path: Path
+    name: str
+    description: str
+    params: dict[str, ParamDecl]
+    requests: dict[str, ParamDecl]
+    tree: NodeSpec | None
+    mark: Mark
+    #: blackboard keys read, with where: (key, mark)
+    reads: list[tuple[str, Mark]] = field(default_factory=list)
+    #: blackboard keys written by skill outputs / recovery nodes: key -> (type or None)
+    writes: dict[str, type | None] = field(default_factory=dict)
+    #: included files, by include node
+    includes: list[NodeSpec] = field(default_factory=list)
+
+
+def _tname(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, int):
+        return "an integer"
+    if isinstance(value, float):
+        return "a number"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "a mapping"
+    return type(value).__name__
+
+
+def accepts(tp: type, value: Any) -> bool:
+    """Whether ``value`` has declared type ``tp`` (an int is accepted for a float)."""
+    return Param("_", tp, required=True).accepts(value)
+
+
+def type_compatible(want: type, have: type | None) -> bool:
+    """Whether a value statically known to be of type ``have`` fits ``want``."""
+    if have is None or have is object or want is object:
+        return True
+    if want is float:
+        return have in (int, float)
+    return have is want
+
+
+class _Parser:
+    def __init__(
+        self,
+        path: Path,
+        display: str,
+        problems: Problems,
+        registry: SkillRegistry,
+        include: Callable[[str, Mark, NodeSpec], FileSpec | None],
+    ) -> None:
+        self.path = path
+        self.display = display
+        self.p = problems
+        self.registry = registry
+        self.include = include
+        self.params: dict[str, ParamDecl] = {}
+        self.reads: list[tuple[str, Mark]] = []
+        self.writes: dict[str, type | None] = {}
+        self.includes: list[NodeSpec] = []
+
+    def err(self, mark: Mark, msg: str) -> None:
+        self.p.add(mark, msg)
+
+    # -- top level -------------------------------------------------------------------
+    def file(self, doc: Any) -> FileSpec:
+        top = Mark(self.display, 1, 1)
+        name = self.path.stem
+        desc = ""
+        if not isinstance(doc, YDict):
+            self.err(getattr(doc, "mark", top), f"a mission file is a mapping with a 'tree' key, got {_tname(doc)}")
+            return FileSpec(self.path, name, desc, {}, {}, None, top)
+        for key in doc:
+            if key not in TOP_KEYS:
+                self.err(doc.key_mark(key), f"unknown top-level key {key!r}" + (
+                    did_you_mean(key, TOP_KEYS) or f" (expected one of: {', '.join(TOP_KEYS)})"))
+        if "mission" in doc:
+            if isinstance(doc["mission"], str) and NAME_RE.fullmatch(doc["mission"]):
+                name = doc["mission"]
+            else:
+                self.err(doc.value_mark("mission"), f"mission: expected a name (letters, digits, _ and -), got {doc['mission']!r}")
+        if "description" in doc:
+            if isinstance(doc["description"], str):
+                desc = doc["description"]
+            else:
+                self.err(doc.value_mark("description"), f"description: expected a string, got {_tname(doc['description'])}")
+        self.params = self.decls(doc, "params", allow_default=True)
+        requests = self.decls(doc, "requests", allow_default=False)
+        tree: NodeSpec | None = None
+        if "tree" not in doc:
+            self.err(doc.mark, "missing required key 'tree' (the root node)")
+        else:
+            tree = self.node(doc["tree"], doc.value_mark("tree"), 0)
+        for r in requests:
+            self.writes[f"request.{r}"] = requests[r].type
+        return FileSpec(self.path, name, desc, self.params, requests, tree, doc.mark, self.reads, self.writes, self.includes)
+
+    def decls(self, doc: YDict, key: str, allow_default: bool) -> dict[str, ParamDecl]:
+        out: dict[str, ParamDecl] = {}
+        if key not in doc or doc[key] is None:
+            return out
+        section = doc[key]
+        if not isinstance(section, YDict):
+            self.err(doc.value_mark(key), f"{key}: expected a mapping of name -> {{type: ...}}, got {_tname(section)}")
+            return out
+        for name, d in section.items():
+            km, vm = section.key_mark(name), section.value_mark(name)
+            if not KEY_RE.fullmatch(name) or "." in name:
+                self.err(km, f"{key}: bad name {name!r} (letters, digits, _ and -)")
+                continue
+            if isinstance(d, str) and d in TYPE_NAMES:
+                out[name] = ParamDecl(name, TYPE_NAMES[d], mark=km)
+                continue
+            if not isinstance(d, YDict):
+                self.err(vm, f"{key}.{name}: expected {{type: ...}} or a type name, got {d!r}")
+                continue
+            ok = True
+            allowed = DECL_KEYS if allow_default else ("type", "doc")
+            for k in d:
+                if k not in allowed:
+                    hint = did_you_mean(k, allowed)
+                    extra = " (request fields have no default: a request must give them)" if k == "default" else ""
+                    self.err(d.key_mark(k), f"{key}.{name}: unknown key {k!r}{hint or extra or ' (expected one of: ' + ', '.join(allowed) + ')'}")
+                    ok = False
+            tp_name = d.get("type")
+            if "type" not in d:
+                self.err(d.mark, f"{key}.{name}: missing required key 'type' (one of: {', '.join(TYPE_NAMES)})")
+                continue
+            if not isinstance(tp_name, str) or tp_name not in TYPE_NAMES:
+                self.err(d.value_mark("type"), f"{key}.{name}: unknown type {tp_name!r}" + (
+                    did_you_mean(str(tp_name), TYPE_NAMES) or f" (expected one of: {', '.join(TYPE_NAMES)})"))
+                continue
+            tp = TYPE_NAMES[tp_name]
+            doc_s = d.get("doc", "")
+            if not isinstance(doc_s, str):
+                self.err(d.value_mark("doc"), f"{key}.{name}.doc: expected a string, got {_tname(doc_s)}")
+            decl = ParamDecl(name, tp, doc=str(doc_s), mark=km)
+            if "default" in d:
+                decl.default, decl.has_default = d["default"], True
+                if not accepts(tp, d["default"]):
+                    self.err(d.value_mark("default"), f"{key}.{name}: default {d['default']!r} is not {tp_name}")
+                    ok = False
+            if ok:
+                out[name] = decl
+        return out
+
+    # -- values --------------------------------------------------------------------
+    def is_param(self, name: str) -> bool:
+        return name in self.params
+
+    def value(self, raw: Any, mark: Mark, what: str) -> Expr | None:
+        try:
+            e = parse_value(raw, self.is_param)
+        except ValueSyntaxError as ex:
+            self.err(mark, f"{what}: {ex}")
+            return None
+        for key in e.reads():
+            self.reads.append((key, mark))
+        return e
+
+    def static_type(self, e: Expr) -> type | None:
+        """Type of ``e`` known before run time, or None."""
+        if isinstance(e, Const):
+            return type(e.value) if e.value is not None else None
+        if isinstance(e, ParamRef):
+            d = self.params.get(e.name)
+            return d.type if d else None
+        if isinstance(e, Template):
+            return str
+        return None
+
+    # -- nodes ---------------------------------------------------------------------
+    def node(self, raw: Any, mark: Mark, depth: int) -> NodeSpec | None:
+        if not isinstance(raw, YDict):
+            if isinstance(raw, str) and raw in NODE_TYPES:
+                self.err(mark, f"node {raw!r} needs an argument (e.g. '{raw}: ...')")
+            else:
+                self.err(mark, f"expected a node (a mapping with one of: {', '.join(NODE_TYPES)}), got {_tname(raw)}")
+            return None
+        kinds = [k for k in raw if k in NODE_TYPES]
+        if not kinds:
+            unknown = [k for k in raw if k != "name"]
+            for k in unknown:
+                hint = did_you_mean(k, NODE_TYPES)
+                if hint or len(unknown) == 1:
+                    self.err(raw.key_mark(k), f"unknown node type {k!r}" + (hint or f" (expected one of: {', '.join(NODE_TYPES)})"))
+                    return None
+            self.err(raw.mark, f"node has no type: expected one of: {', '.join(NODE_TYPES)}")
+            return None
+        if len(kinds) > 1:
+            self.err(raw.key_mark(kinds[1]), f"node has several types ({', '.join(repr(k) for k in kinds)}); one node per mapping, put them in a sequence")
+            return None
+        kind = kinds[0]
+        allowed = OPTIONS[kind] + ("name",)
+        for k in raw:
+            if k != kind and k not in allowed:
+                self.err(raw.key_mark(k), f"unknown key {k!r} for {kind}" + (
+                    did_you_mean(k, allowed) or (f" (expected one of: {', '.join(allowed)})" if len(allowed) > 1 else " (it takes only 'name')")))
+        spec = NodeSpec(kind, raw.key_mark(kind))
+        if "name" in raw:
+            nm = raw["name"]
+            if isinstance(nm, str) and NAME_RE.fullmatch(nm):
+                spec.name = nm
+            else:
+                self.err(raw.value_mark("name"), f"name: expected a node name (letters, digits, _ and -), got {nm!r}")
+        arg, am = raw[kind], raw.value_mark(kind)
+        getattr(self, "n_" + kind)(spec, raw, arg, am, depth)
+        return spec
+
+    def child(self, arg: Any, am: Mark, depth: int, kind: str) -> NodeSpec | None:
+        if arg is None:
+            self.err(am, f"{kind}: expected a child node, got nothing")
+            return None
+        if isinstance(arg, YList):
+            self.err(am, f"{kind}: expected one child node, got a list (wrap the list in a sequence)")
+            return None
+        return self.node(arg, am, depth + 1)
+
+    def children(self, spec: NodeSpec, arg: Any, am: Mark, depth: int) -> None:
+        if not isinstance(arg, YList) or not arg:
+            self.err(am, f"{spec.kind}: expected a non-empty list of child nodes, got {_tname(arg) if arg != [] else 'an empty list'}")
+            return
+        for i, item in enumerate(arg):
+            c = self.node(item, arg.item_mark(i), depth + 1)
+            if c is not None:
+                spec.children.append(c)
+
+    def flag(self, spec: NodeSpec, raw: YDict, key: str, default: bool) -> bool:
+        if key not in raw:
+            return default
+        v = raw[key]
+        if not isinstance(v, bool):
+            self.err(raw.value_mark(key), f"{spec.kind}.{key}: expected true or false, got {v!r}")
+            return default
+        return v
+
+    def count(self, spec: NodeSpec, raw: YDict, key: str, minimum: int, required: bool) -> int | None:
+        if key not in raw:
+            if required:
+                self.err(spec.mark, f"{spec.kind}: missing required key {key!r} (an integer >= {minimum})")
+            return None
+        v = raw[key]
+        if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+            self.err(raw.value_mark(key), f"{spec.kind}.{key}: expected an integer >= {minimum}, got {v!r}")
+            return None
+        return v
+
+    def seconds(self, spec: NodeSpec, raw: Any, mark: Mark, what: str, positive: bool) -> Expr | None:
+        if isinstance(raw, (int, float)) and not isinstance(raw, bool):
+            if raw < 0 or (positive and raw == 0) or raw != raw or raw == float("inf"):
+                self.err(mark, f"{what}: expected a number of seconds {'> 0' if positive else '>= 0'}, got {raw!r}")
+                return None
+            return Const(float(raw))
+        if isinstance(raw, str) and "{" in raw:
+            e = self.value(raw, mark, what)
+            if e is not None:
+                t = self.static_type(e)
+                if isinstance(e, Template) or not type_compatible(float, t):
+                    self.err(mark, f"{what}: expected a number of seconds, got {raw!r} ({t.__name__ if t else 'unknown'})")
+                    return None
+            return e
+        self.err(mark, f"{what}: expected a number of seconds or a reference like '{{timeout}}', got {raw!r}")
+        return None
+
+    def n_sequence(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        self.children(spec, arg, am, depth)
+        spec.opts["reactive"] = self.flag(spec, raw, "reactive", False)
+
+    n_fallback = n_sequence
+
+    def n_parallel(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        self.children(spec, arg, am, depth)
+        n = len(spec.children)
+        pol = raw.get("policy", "all")
+        threshold: int | None = None
+        if pol == "all":
+            threshold = max(n, 1)
+        elif pol == "one":
+            threshold = 1
+        elif isinstance(pol, int) and not isinstance(pol, bool):
+            if 1 <= pol <= max(n, 1):
+                threshold = pol
+            else:
+                self.err(raw.value_mark("policy"), f"parallel.policy: {pol} is outside 1..{n} (the number of children)")
+        else:
+            self.err(raw.value_mark("policy"), f"parallel.policy: expected 'all', 'one' or a number of children, got {pol!r}"
+                     + did_you_mean(str(pol), ("all", "one")))
+        spec.opts["threshold"] = threshold or 1
+
+    def _deco(self, spec: NodeSpec, arg: Any, am: Mark, depth: int) -> None:
+        c = self.child(arg, am, depth, spec.kind)
+        if c is not None:
+            spec.children.append(c)
+
+    def n_retry(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        self._deco(spec, arg, am, depth)
+        spec.opts["attempts"] = self.count(spec, raw, "attempts", 1, True) or 1
+
+    def n_timeout(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        self._deco(spec, arg, am, depth)
+        if "seconds" not in raw:
+            self.err(spec.mark, "timeout: missing required key 'seconds' (clock seconds > 0)")
+        else:
+            spec.opts["seconds"] = self.seconds(spec, raw["seconds"], raw.value_mark("seconds"), "timeout.seconds", True)
+
+    def n_repeat(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        self._deco(spec, arg, am, depth)
+        times = self.count(spec, raw, "times", 1, False)
+        until = self.flag(spec, raw, "until_failure", False)
+        if "times" in raw and until:
+            self.err(spec.mark, "repeat: give either 'times' or 'until_failure: true', not both")
+        elif "times" not in raw and not until and "until_failure" not in raw:
+            self.err(spec.mark, "repeat: missing 'times: N' (or 'until_failure: true')")
+        elif "times" not in raw and not until:
+            self.err(raw.value_mark("until_failure"), "repeat: 'until_failure: false' needs 'times: N' instead")
+        spec.opts["times"] = times
+
+    def n_invert(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        self._deco(spec, arg, am, depth)
+
+    n_force_success = n_invert
+    n_force_failure = n_invert
+
+    def n_condition(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        key = arg
+        if isinstance(key, str) and key.startswith("{") and key.endswith("}") and "{" not in key[1:-1]:
+            key = key[1:-1].strip()
+        if not isinstance(key, str) or not KEY_RE.fullmatch(key):
+            self.err(am, f"condition: expected a blackboard key, got {arg!r}")
+            key = None
+        elif key in self.params:
+            self.err(am, f"condition: {key!r} is a parameter, not a blackboard key (compare it in the including file)")
+            key = None
+        else:
+            self.reads.append((key, am))
+        op = raw.get("op")
+        if "op" not in raw:
+            self.err(spec.mark, f"condition: missing required key 'op' (one of: {', '.join(OPS)})")
+        elif not isinstance(op, str) or op not in OPS:
+            self.err(raw.value_mark("op"), f"condition.op: unknown operator {op!r}" + (
+                did_you_mean(str(op), OPS) or f" (expected one of: {', '.join(OPS)})"))
+            op = None
+        value: Expr | None = Const(None)
+        if op == "exists":
+            if "value" in raw:
+                self.err(raw.key_mark("value"), "condition: op 'exists' takes no value")
+        elif op is not None:
+            if "value" not in raw:
+                self.err(spec.mark, f"condition: op {op!r} needs a 'value'")
+            else:
+                value = self.value(raw["value"], raw.value_mark("value"), "condition.value")
+                if op == "in" and value is not None:
+                    t = self.static_type(value)
+                    if t is not None and t not in (list, str, dict):
+                        self.err(raw.value_mark("value"), f"condition: op 'in' needs a list value, got {raw['value']!r}")
+        spec.opts.update(key=key, op=op, value=value)
+
+    def n_wait(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        spec.opts["seconds"] = self.seconds(spec, arg, am, "wait", False)
+
+    def n_skill(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        if not isinstance(arg, str):
+            self.err(am, f"skill: expected a skill name, got {arg!r}")
+            return
+        sk = self.registry.get(arg)
+        if sk is None:
+            hint = did_you_mean(arg, self.registry.names())
+            known = self.registry.names()
+            self.err(am, f"unknown skill {arg!r}" + (hint or (f" (known skills: {', '.join(known)})" if known else " (no skills are registered)")))
+        spec.opts["skill"] = sk
+        params: dict[str, Expr] = {}
+        praw = raw.get("params")
+        if praw is not None and not isinstance(praw, YDict):
+            self.err(raw.value_mark("params"), f"skill {arg!r}: params: expected a mapping, got {_tname(praw)}")
+            praw = None
+        if isinstance(praw, YDict):
+            for pname, pval in praw.items():
+                vm = praw.value_mark(pname)
+                e = self.value(pval, vm, f"skill {arg!r}: parameter {pname!r}")
+                if e is None:
+                    continue
+                params[pname] = e
+                if sk is None:
+                    continue
+                decl = sk.param(pname)
+                if decl is None:
+                    names = [p.name for p in sk.params]
+                    self.err(praw.key_mark(pname), f"skill {arg!r}: unknown parameter {pname!r}" + (
+                        did_you_mean(pname, names) or (f" (expected one of: {', '.join(names)})" if names else " (it takes no parameters)")))
+                    continue
+                self.check_param(sk, decl, e, pval, vm)
+        if sk is not None:
+            for p in sk.params:
+                if p.required and p.name not in params and (not isinstance(praw, YDict) or p.name not in praw):
+                    self.err(am, f"skill {arg!r}: missing required parameter {p.name!r} ({p.type_name()})")
+        spec.opts["params"] = params
+        outs: dict[str, str] = {}
+        oraw = raw.get("outputs")
+        if oraw is not None and not isinstance(oraw, YDict):
+            self.err(raw.value_mark("outputs"), f"skill {arg!r}: outputs: expected a mapping output -> blackboard key, got {_tname(oraw)}")
+            oraw = None
+        if isinstance(oraw, YDict):
+            for oname, key in oraw.items():
+                vm = oraw.value_mark(oname)
+                if isinstance(key, str) and key.startswith("{") and key.endswith("}"):
+                    key = key[1:-1].strip()
+                if not isinstance(key, str) or not KEY_RE.fullmatch(key):
+                    self.err(vm, f"skill {arg!r}: output {oname!r}: expected a blackboard key name, got {oraw[oname]!r}")
+                    continue
+                if key.startswith("request.") or key in FAILURE_KEYS:
+                    self.err(vm, f"skill {arg!r}: output {oname!r}: key {key!r} is reserved (written by the executive)")
+                    continue
+                out_decl = sk.output(oname) if sk is not None else None
+                if sk is not None and out_decl is None:
+                    names = [o.name for o in sk.outputs]
+                    self.err(oraw.key_mark(oname), f"skill {arg!r}: unknown output {oname!r}" + (
+                        did_you_mean(oname, names) or (f" (expected one of: {', '.join(names)})" if names else " (it declares no outputs)")))
+                    continue
+                outs[oname] = key
+                tp = out_decl.type if out_decl is not None else None
+                prev = self.writes.get(key, tp)
+                self.writes[key] = tp if prev == tp else None
+        spec.opts["outputs"] = outs
+
+    def check_param(self, sk: SkillSpec, decl: Param, e: Expr, raw: Any, mark: Mark) -> None:
+        where = f"skill {sk.name!r}: parameter {decl.name!r}"
+        if isinstance(e, Const):
+            if not decl.accepts(e.value):
+                self.err(mark, f"{where} expects {decl.type_name()}, got {_tname(e.value)} {e.value!r}")
+            elif decl.choices and e.value not in decl.choices:
+                self.err(mark, f"{where} must be one of {list(decl.choices)}, got {e.value!r}"
+                         + did_you_mean(str(e.value), [str(c) for c in decl.choices]))
+            return
+        t = self.static_type(e)
+        if isinstance(e, Ref):
+            t = None  # checked globally once all writes are known (compiler), else at run time
+        if not type_compatible(decl.type, t):
+            self.err(mark, f"{where} expects {decl.type_name()}, but {raw!r} is {t.__name__ if t else '?'}")
+
+    def n_include(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        if not isinstance(arg, str) or not arg.strip():
+            self.err(am, f"include: expected a file path, got {arg!r}")
+            return
+        bindings: dict[str, tuple[Expr, Mark, Mark, Any]] = {}
+        praw = raw.get("params")
+        if praw is not None and not isinstance(praw, YDict):
+            self.err(raw.value_mark("params"), f"include: params: expected a mapping, got {_tname(praw)}")
+            praw = None
+        if isinstance(praw, YDict):
+            for pname, pval in praw.items():
+                e = self.value(pval, praw.value_mark(pname), f"include {arg!r}: parameter {pname!r}")
+                if e is not None:
+                    bindings[pname] = (e, praw.key_mark(pname), praw.value_mark(pname), pval)
+        spec.opts["path"] = arg
+        spec.opts["bindings"] = {k: v[0] for k, v in bindings.items()}
+        sub = self.include(arg, am, spec)
+        spec.opts["file"] = sub
+        self.includes.append(spec)
+        if sub is None:
+            return
+        if spec.name is None:
+            spec.name = sub.name
+        for pname, (e, km, vm, pval) in bindings.items():
+            d = sub.params.get(pname)
+            if d is None:
+                self.err(km, f"include {arg!r}: unknown parameter {pname!r}" + (
+                    did_you_mean(pname, sub.params) or (f" (it declares: {', '.join(sub.params)})" if sub.params else " (it declares no params)")))
+                continue
+            if isinstance(e, Const):
+                if not accepts(d.type, e.value):
+                    self.err(vm, f"include {arg!r}: parameter {pname!r} expects {d.type.__name__}, got {_tname(e.value)} {e.value!r}")
+            elif not type_compatible(d.type, self.static_type(e)):
+                t = self.static_type(e)
+                self.err(vm, f"include {arg!r}: parameter {pname!r} expects {d.type.__name__}, but {pval!r} is {t.__name__ if t else '?'}")
+        for pname, d in sub.params.items():
+            if not d.has_default and pname not in bindings:
+                self.err(am, f"include {arg!r}: missing required parameter {pname!r} ({d.type.__name__})")
+
+    def n_recovery(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        if not isinstance(arg, YDict):
+            self.err(am, f"recovery: expected a mapping with {', '.join(RECOVERY_KEYS)}, got {_tname(arg)}")
+            return
+        for k in arg:
+            if k not in RECOVERY_KEYS:
+                self.err(arg.key_mark(k), f"unknown key {k!r} for recovery" + (
+                    did_you_mean(k, RECOVERY_KEYS) or f" (expected one of: {', '.join(RECOVERY_KEYS)})"))
+        parts: dict[str, NodeSpec | None] = {}
+        for k in ("action", "recovery", "give_up"):
+            if k in arg:
+                parts[k] = self.child(arg[k], arg.value_mark(k), depth, f"recovery.{k}")
+            elif k != "give_up":
+                self.err(arg.mark, f"recovery: missing required key {k!r} (a node)")
+        mr = arg.get("max_recoveries")
+        if "max_recoveries" not in arg:
+            self.err(arg.mark, "recovery: missing required key 'max_recoveries' (an integer >= 0)")
+            mr = 0
+        elif isinstance(mr, bool) or not isinstance(mr, int) or mr < 0:
+            self.err(arg.value_mark("max_recoveries"), f"recovery.max_recoveries: expected an integer >= 0, got {mr!r}")
+            mr = 0
+        spec.opts["max_recoveries"] = mr
+        spec.opts["has_give_up"] = parts.get("give_up") is not None
+        spec.children = [c for c in (parts.get("action"), parts.get("recovery"), parts.get("give_up")) if c is not None]
+        name = spec.name or "recovery"
+        for suffix in RECOVERY_SUFFIXES:
+            self.writes[f"{name}.{suffix}"] = str if suffix in ("last_failure", "outcome") else int
+
+
+def parse_file(
+    doc: Any,
+    path: Path,
+    display: str,
+    problems: Problems,
+    registry: SkillRegistry,
+    include: Callable[[str, Mark, NodeSpec], FileSpec | None],
+) -> FileSpec:
+    """Validate one loaded mission file. ``include(rel_path, mark, node)`` loads an
+    included file (or records a problem and returns None)."""
+    return _Parser(path, display, problems, registry, include).file(doc)

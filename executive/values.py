@@ -1,0 +1,258 @@
+"""Values in mission files: constants, blackboard references, string templates.
+
+A mission value is parsed once (:func:`parse_value`) into an expression tree. At load
+time references may still name the file's parameters (:class:`ParamRef`); when a tree
+is instantiated :func:`substitute` replaces those by the parameters' values, leaving
+only constants and blackboard reads, which a node evaluates against the blackboard when
+it starts (:meth:`Expr.eval`).
+
+Syntax: a string that is exactly ``"{key}"`` is a reference (typed: it evaluates to the
+key's value); ``"text {key} text"`` is a template (evaluates to a string); ``{{`` and
+``}}`` are literal braces.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping
+from typing import Any
+
+__all__ = [
+    "Const",
+    "DictExpr",
+    "Expr",
+    "KEY_RE",
+    "ListExpr",
+    "MissingKey",
+    "ParamRef",
+    "Ref",
+    "Template",
+    "ValueSyntaxError",
+    "parse_value",
+    "substitute",
+]
+
+#: a blackboard key or parameter name: dotted identifiers (``request.item``, ``grasp.attempts``)
+KEY_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*(?:\.[A-Za-z0-9_\-]+)*")
+_TOKEN_RE = re.compile(r"\{\{|\}\}|\{([^{}]*)\}|[{}]")
+
+
+class MissingKey(KeyError):
+    """A blackboard key read before anything wrote it."""
+
+    def __init__(self, key: str) -> None:
+        super().__init__(key)
+        self.key = key
+
+
+class ValueSyntaxError(ValueError):
+    """A malformed reference or template in a mission value."""
+
+
+class Expr:
+    """An evaluable mission value. ``static`` is true when it reads no blackboard key."""
+
+    static = True
+
+    def eval(self, bb: Mapping[str, Any]) -> Any:
+        raise TypeError(f"{type(self).__name__} cannot be evaluated")
+
+    def reads(self) -> list[str]:
+        """Blackboard keys this value reads."""
+        return []
+
+    def params(self) -> list[str]:
+        """Parameter names this value refers to (before substitution)."""
+        return []
+
+
+class Const(Expr):
+    __slots__ = ("value",)
+
+    def __init__(self, value: Any) -> None:
+        self.value = value
+
+    def eval(self, bb: Mapping[str, Any]) -> Any:
+        return self.value
+
+    def __repr__(self) -> str:
+        return f"Const({self.value!r})"
+
+
+class Ref(Expr):
+    """Reads blackboard key ``key``."""
+
+    __slots__ = ("key",)
+    static = False
+
+    def __init__(self, key: str) -> None:
+        self.key = key
+
+    def eval(self, bb: Mapping[str, Any]) -> Any:
+        try:
+            return bb[self.key]
+        except KeyError:
+            raise MissingKey(self.key) from None
+
+    def reads(self) -> list[str]:
+        return [self.key]
+
+    def __repr__(self) -> str:
+        return f"Ref({self.key!r})"
+
+
+class ParamRef(Expr):
+    """Refers to parameter ``name`` of the file it appears in (substituted at instantiate)."""
+
+    __slots__ = ("name",)
+    static = False
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def params(self) -> list[str]:
+        return [self.name]
+
+    def __repr__(self) -> str:
+        return f"ParamRef({self.name!r})"
+
+
+class Template(Expr):
+    """A string with embedded references; ``parts`` alternates literal text and Exprs."""
+
+    __slots__ = ("parts", "static")
+
+    def __init__(self, parts: list[str | Expr]) -> None:
+        self.parts = parts
+        self.static = all(isinstance(p, str) or p.static for p in parts)
+
+    def eval(self, bb: Mapping[str, Any]) -> Any:
+        return "".join(p if isinstance(p, str) else str(p.eval(bb)) for p in self.parts)
+
+    def reads(self) -> list[str]:
+        return [k for p in self.parts if isinstance(p, Expr) for k in p.reads()]
+
+    def params(self) -> list[str]:
+        return [k for p in self.parts if isinstance(p, Expr) for k in p.params()]
+
+
+class ListExpr(Expr):
+    __slots__ = ("items", "static")
+
+    def __init__(self, items: list[Expr]) -> None:
+        self.items = items
+        self.static = all(i.static for i in items)
+
+    def eval(self, bb: Mapping[str, Any]) -> Any:
+        return [i.eval(bb) for i in self.items]
+
+    def reads(self) -> list[str]:
+        return [k for i in self.items for k in i.reads()]
+
+    def params(self) -> list[str]:
+        return [k for i in self.items for k in i.params()]
+
+
+class DictExpr(Expr):
+    __slots__ = ("items", "static")
+
+    def __init__(self, items: dict[str, Expr]) -> None:
+        self.items = items
+        self.static = all(i.static for i in items.values())
+
+    def eval(self, bb: Mapping[str, Any]) -> Any:
+        return {k: v.eval(bb) for k, v in self.items.items()}
+
+    def reads(self) -> list[str]:
+        return [k for i in self.items.values() for k in i.reads()]
+
+    def params(self) -> list[str]:
+        return [k for i in self.items.values() for k in i.params()]
+
+
+def _parse_string(s: str, is_param: Any) -> Expr:
+    parts: list[str | Expr] = []
+    text: list[str] = []
+    pos = 0
+    for m in _TOKEN_RE.finditer(s):
+        text.append(s[pos : m.start()])
+        pos = m.end()
+        tok = m.group(0)
+        if tok == "{{":
+            text.append("{")
+        elif tok == "}}":
+            text.append("}")
+        elif tok in ("{", "}"):
+            raise ValueSyntaxError(f"unbalanced {tok!r} in {s!r} (write '{tok * 2}' for a literal brace)")
+        else:
+            name = m.group(1).strip()
+            if not KEY_RE.fullmatch(name):
+                raise ValueSyntaxError(f"bad reference {tok!r} in {s!r} (expected {{key}}, e.g. {{request.item}})")
+            lit = "".join(text)
+            text = []
+            if lit:
+                parts.append(lit)
+            parts.append(ParamRef(name) if is_param(name) else Ref(name))
+    text.append(s[pos:])
+    tail = "".join(text)
+    if tail:
+        parts.append(tail)
+    if not any(isinstance(p, Expr) for p in parts):
+        return Const(tail if not parts else "".join(p for p in parts if isinstance(p, str)))
+    if len(parts) == 1:
+        return parts[0]  # type: ignore[return-value]
+    return Template(parts)
+
+
+def parse_value(value: Any, is_param: Any) -> Expr:
+    """Parse a loaded YAML value into an Expr. ``is_param(name)`` tells whether a
+    reference names a parameter of the current file. Raises ValueSyntaxError."""
+    if isinstance(value, str):
+        if "{" not in value and "}" not in value:
+            return Const(value)
+        return _parse_string(value, is_param)
+    if isinstance(value, list):
+        items = [parse_value(v, is_param) for v in value]
+        if all(isinstance(i, Const) for i in items):
+            return Const([i.value for i in items])  # type: ignore[attr-defined]
+        return ListExpr(items)
+    if isinstance(value, dict):
+        d = {str(k): parse_value(v, is_param) for k, v in value.items()}
+        if all(isinstance(i, Const) for i in d.values()):
+            return Const({k: i.value for k, i in d.items()})  # type: ignore[attr-defined]
+        return DictExpr(d)
+    return Const(value)
+
+
+def substitute(expr: Expr, env: Mapping[str, Expr]) -> Expr:
+    """Replace every :class:`ParamRef` by ``env[name]`` (an Expr without ParamRefs)."""
+    if isinstance(expr, ParamRef):
+        return env[expr.name]
+    if isinstance(expr, (Const, Ref)):
+        return expr
+    if isinstance(expr, Template):
+        parts: list[str | Expr] = []
+        for p in expr.parts:
+            q = p if isinstance(p, str) else substitute(p, env)
+            if isinstance(q, Const):
+                q = str(q.value)
+            if isinstance(q, Template):
+                parts.extend(q.parts)
+            elif isinstance(q, str) and parts and isinstance(parts[-1], str):
+                parts[-1] = parts[-1] + q
+            else:
+                parts.append(q)
+        if all(isinstance(p, str) for p in parts):
+            return Const("".join(parts))  # type: ignore[arg-type]
+        return Template(parts)
+    if isinstance(expr, ListExpr):
+        items = [substitute(i, env) for i in expr.items]
+        if all(isinstance(i, Const) for i in items):
+            return Const([i.value for i in items])  # type: ignore[attr-defined]
+        return ListExpr(items)
+    if isinstance(expr, DictExpr):
+        d = {k: substitute(v, env) for k, v in expr.items.items()}
+        if all(isinstance(i, Const) for i in d.values()):
+            return Const({k: i.value for k, i in d.items()})  # type: ignore[attr-defined]
+        return DictExpr(d)
+    return expr
