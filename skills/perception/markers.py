@@ -1,0 +1,316 @@
+"""ArUco marker detection and pose, refined with depth and expressed in ``map``.
+
+Frames (see :mod:`mmexec.drivers.interfaces`): the camera optical frame has z forward,
+x right, y down. The marker frame is OpenCV's: origin at the centre of the black square,
+x right, y up as printed, z out of the printed face (towards a camera that sees it).
+Object points for ``solvePnP(..., SOLVEPNP_IPPE_SQUARE)`` are top-left, top-right,
+bottom-right, bottom-left: ``(-l/2, l/2, 0), (l/2, l/2, 0), (l/2, -l/2, 0), (-l/2, -l/2, 0)``.
+
+Speed: OpenCV's default detector costs 7-14 ms on a 640x480 frame, mostly in the
+adaptive thresholding at three window sizes over the whole image. :class:`MarkerDetector`
+instead (1) looks in a region of interest around the markers it found last time, (2)
+otherwise detects on a 2x downscaled image with a single threshold window, and
+(3) always refines the corners at full resolution with ``cv2.cornerSubPix``, so the
+accuracy is the full-resolution one. If the fast path finds nothing it can fall back to
+the full-resolution detector (``fallback_full``).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from mmexec.drivers.interfaces import CameraFrame, CameraIntrinsics
+
+__all__ = [
+    "DetectorConfig",
+    "MarkerDetection",
+    "MarkerDetector",
+    "MarkerObservation",
+    "estimate_marker_pose",
+    "marker_object_points",
+    "observe_markers",
+    "refine_pose_with_depth",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    """Detection settings. ``dictionary`` is a ``cv2.aruco`` predefined dictionary name;
+    ``marker_length`` [m] is the side of the black square; ``downscale`` the factor of the
+    fast first pass (1 = full resolution); ``roi_margin`` [fraction of the marker size]
+    around the previous detection searched first; ``threshold_window`` [px, odd, at the
+    detection scale] the single adaptive-threshold window of the fast pass."""
+
+    dictionary: str = "DICT_4X4_50"
+    marker_length: float = 0.05
+    downscale: int = 2
+    use_roi: bool = True
+    roi_margin: float = 0.6
+    threshold_window: int = 7
+    fallback_full: bool = True
+    subpix_window: int = 5
+    min_marker_perimeter_px: float = 40.0   # at full resolution
+    depth_refine: bool = True
+    depth_min_fraction: float = 0.3          # fraction of quad pixels with valid depth
+    depth_range: tuple[float, float] = (0.1, 10.0)  # m
+
+    def validate(self) -> list[str]:
+        errs = []
+        if not hasattr(cv2.aruco, self.dictionary) or not self.dictionary.startswith("DICT_"):
+            errs.append(f"dictionary: unknown ArUco dictionary {self.dictionary!r}")
+        if not self.marker_length > 0:
+            errs.append(f"marker_length: must be > 0 m, got {self.marker_length}")
+        if self.downscale < 1:
+            errs.append(f"downscale: must be >= 1, got {self.downscale}")
+        if self.threshold_window < 3 or self.threshold_window % 2 == 0:
+            errs.append(f"threshold_window: must be odd and >= 3, got {self.threshold_window}")
+        return errs
+
+
+@dataclass(frozen=True)
+class MarkerDetection:
+    """A marker found in an image: ``corners`` 4x2 float32 pixels (TL, TR, BR, BL)."""
+
+    id: int
+    corners: np.ndarray
+
+
+@dataclass(frozen=True)
+class MarkerObservation:
+    """One marker seen in one frame.
+
+    ``T_map_marker`` and ``T_camera_marker``: 4x4 marker pose in ``map`` and in the camera
+    optical frame; ``corners`` 4x2 pixels (TL, TR, BR, BL); ``reprojection_error`` RMS
+    [px]; ``distance`` [m] camera to marker centre; ``stamp`` [s, clock time of the
+    frame]; ``depth_refined`` tells whether the depth image corrected the translation.
+    """
+
+    id: int
+    T_map_marker: np.ndarray
+    T_camera_marker: np.ndarray
+    corners: np.ndarray
+    reprojection_error: float
+    distance: float
+    stamp: float
+    depth_refined: bool = False
+
+
+def marker_object_points(length: float) -> np.ndarray:
+    """4x3 object points (TL, TR, BR, BL) of a marker of side ``length`` [m]."""
+    h = length / 2.0
+    return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]], dtype=np.float64)
+
+
+def estimate_marker_pose(
+    corners: np.ndarray, intrinsics: CameraIntrinsics, length: float
+) -> tuple[np.ndarray, float]:
+    """``(T_camera_marker, rms_reprojection_error_px)`` from the 4 corner pixels with
+    ``SOLVEPNP_IPPE_SQUARE``."""
+    K = intrinsics.matrix()
+    dist = np.asarray(intrinsics.dist, dtype=np.float64)
+    obj = marker_object_points(length)
+    img = np.asarray(corners, dtype=np.float64).reshape(4, 1, 2)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not ok:
+        raise ValueError("solvePnP failed on the marker corners")
+    R, _ = cv2.Rodrigues(rvec)
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = tvec.ravel()
+    proj, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
+    err = float(np.sqrt(np.mean(np.sum((proj.reshape(4, 2) - img.reshape(4, 2)) ** 2, axis=1))))
+    return T, err
+
+
+def refine_pose_with_depth(
+    T_camera_marker: np.ndarray,
+    corners: np.ndarray,
+    depth: np.ndarray,
+    *,
+    min_fraction: float = 0.3,
+    depth_range: tuple[float, float] = (0.1, 10.0),
+) -> tuple[np.ndarray, bool]:
+    """Correct the translation's scale with the depth image.
+
+    The marker is planar, so the depth at its centre pixel is the z of its centre in the
+    camera frame. The median of the valid depths inside the marker quad (robust to holes
+    and edge pixels) is compared with the z of the PnP translation; the translation is
+    scaled along its ray so its z equals that median. The rotation is kept (PnP gets it
+    right from the corner geometry; the scale is what a wrong marker size or a poor
+    focal length spoils). Returns ``(T, refined)``; ``refined`` is False when too few
+    depth pixels are valid (then ``T`` is returned unchanged).
+    """
+    h, w = depth.shape[:2]
+    quad = np.asarray(corners, dtype=np.float64).reshape(4, 2)
+    # shrink the quad towards its centre to stay clear of edge pixels
+    c = quad.mean(axis=0)
+    inner = c + 0.7 * (quad - c)
+    x0, y0 = np.floor(inner.min(axis=0)).astype(int)
+    x1, y1 = np.ceil(inner.max(axis=0)).astype(int)
+    x0, y0 = max(x0, 0), max(y0, 0)
+    x1, y1 = min(x1, w - 1), min(y1, h - 1)
+    if x1 <= x0 or y1 <= y0:
+        return T_camera_marker, False
+    mask = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
+    cv2.fillConvexPoly(mask, np.round(inner - (x0, y0)).astype(np.int32), 1)
+    patch = depth[y0 : y1 + 1, x0 : x1 + 1]
+    vals = patch[(mask > 0) & np.isfinite(patch)]
+    vals = vals[(vals > depth_range[0]) & (vals < depth_range[1])]
+    total = int(mask.sum())
+    if total == 0 or len(vals) < max(4, min_fraction * total):
+        return T_camera_marker, False
+    z_depth = float(np.median(vals))
+    t = T_camera_marker[:3, 3]
+    if t[2] <= 0:
+        return T_camera_marker, False
+    T = T_camera_marker.copy()
+    T[:3, 3] = t * (z_depth / t[2])
+    return T, True
+
+
+class MarkerDetector:
+    """Fast ArUco detector (see the module doc). Stateful: it remembers where markers were
+    in the previous frame to search there first. Not thread-safe."""
+
+    def __init__(self, config: DetectorConfig | None = None) -> None:
+        self.config = config or DetectorConfig()
+        errs = self.config.validate()
+        if errs:
+            raise ValueError("DetectorConfig: " + "; ".join(errs))
+        cfg = self.config
+        self._dict = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, cfg.dictionary))
+        fast = cv2.aruco.DetectorParameters()
+        fast.adaptiveThreshWinSizeMin = cfg.threshold_window
+        fast.adaptiveThreshWinSizeMax = cfg.threshold_window
+        fast.adaptiveThreshWinSizeStep = 10
+        fast.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+        self._fast = cv2.aruco.ArucoDetector(self._dict, fast)
+        full = cv2.aruco.DetectorParameters()
+        full.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+        self._full = cv2.aruco.ArucoDetector(self._dict, full)
+        self._last: list[tuple[int, int, int, int]] = []  # ROIs x0, y0, x1, y1 (full res)
+        self.last_method = ""
+
+    def reset(self) -> None:
+        """Forget the previous detections (e.g. after the camera moved a lot)."""
+        self._last = []
+
+    def _run_fast(self, gray: np.ndarray, scale: int) -> list[MarkerDetection]:
+        img = gray
+        if scale > 1:
+            img = cv2.resize(gray, (gray.shape[1] // scale, gray.shape[0] // scale), interpolation=cv2.INTER_AREA)
+        corners, ids, _ = self._fast.detectMarkers(img)
+        if ids is None or len(ids) == 0:
+            return []
+        out = []
+        for cid, c in zip(np.asarray(ids).ravel(), corners):
+            pts = c.reshape(4, 2).astype(np.float32)
+            if scale > 1:
+                pts = (pts + 0.5) * scale - 0.5
+            out.append(MarkerDetection(int(cid), pts))
+        return out
+
+    def _refine(self, gray: np.ndarray, dets: list[MarkerDetection]) -> list[MarkerDetection]:
+        win = self.config.subpix_window
+        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 30, 0.01)
+        out = []
+        for d in dets:
+            side = float(np.min(np.linalg.norm(d.corners - np.roll(d.corners, 1, axis=0), axis=1)))
+            wsz = int(max(2, min(win, side / 4)))
+            pts = d.corners.reshape(-1, 1, 2).copy()
+            cv2.cornerSubPix(gray, pts, (wsz, wsz), (-1, -1), crit)
+            out.append(MarkerDetection(d.id, pts.reshape(4, 2)))
+        return out
+
+    def detect(self, gray: np.ndarray) -> list[MarkerDetection]:
+        """Markers in a grey (HxW uint8) or RGB image, corners at full resolution."""
+        if gray.ndim == 3:
+            gray = cv2.cvtColor(gray, cv2.COLOR_RGB2GRAY)
+        cfg = self.config
+        H, W = gray.shape
+        dets: list[MarkerDetection] = []
+        method = ""
+        if cfg.use_roi and self._last:
+            for x0, y0, x1, y1 in self._last:
+                roi = gray[y0:y1, x0:x1]
+                scale = cfg.downscale if min(roi.shape) >= 80 * cfg.downscale else 1
+                for d in self._run_fast(roi, scale):
+                    if not any(e.id == d.id and np.allclose(e.corners, d.corners + (x0, y0), atol=2) for e in dets):
+                        dets.append(MarkerDetection(d.id, d.corners + np.array([x0, y0], np.float32)))
+            method = "roi" if dets else ""
+        if not dets:
+            dets = self._run_fast(gray, cfg.downscale)
+            method = "downscaled" if dets else ""
+        if not dets and cfg.fallback_full:
+            corners, ids, _ = self._full.detectMarkers(gray)
+            if ids is not None and len(ids):
+                dets = [MarkerDetection(int(i), c.reshape(4, 2).astype(np.float32)) for i, c in zip(np.asarray(ids).ravel(), corners)]
+                method = "full"
+        else:
+            dets = self._refine(gray, dets)
+        dets = [d for d in dets if _perimeter(d.corners) >= cfg.min_marker_perimeter_px]
+        self.last_method = method or "none"
+        self._last = []
+        for d in dets:
+            lo, hi = d.corners.min(axis=0), d.corners.max(axis=0)
+            m = cfg.roi_margin * float(max(hi - lo))
+            self._last.append((
+                max(0, int(lo[0] - m)), max(0, int(lo[1] - m)),
+                min(W, int(math.ceil(hi[0] + m)) + 1), min(H, int(math.ceil(hi[1] + m)) + 1),
+            ))
+        return dets
+
+
+def _perimeter(c: np.ndarray) -> float:
+    return float(np.sum(np.linalg.norm(c - np.roll(c, 1, axis=0), axis=1)))
+
+
+def observe_markers(
+    frame: CameraFrame,
+    detector: MarkerDetector,
+    ids: set[int] | None = None,
+    *,
+    marker_length: float | None = None,
+) -> list[MarkerObservation]:
+    """Detect markers in ``frame`` (optionally only ``ids``), estimate each pose, refine it
+    with the frame's depth image when there is one, and express it in ``map`` through
+    ``T_map_base @ T_base_camera``. ``marker_length`` [m] overrides the detector's."""
+    cfg = detector.config
+    length = marker_length if marker_length is not None else cfg.marker_length
+    dets = detector.detect(frame.rgb)
+    out: list[MarkerObservation] = []
+    T_map_cam = np.asarray(frame.T_map_base) @ np.asarray(frame.T_base_camera)
+    for d in dets:
+        if ids is not None and d.id not in ids:
+            continue
+        try:
+            T_cm, err = estimate_marker_pose(d.corners, frame.intrinsics, length)
+        except ValueError as e:
+            log.warning("marker %d: %s", d.id, e)
+            continue
+        refined = False
+        if cfg.depth_refine and frame.depth is not None:
+            T_cm, refined = refine_pose_with_depth(
+                T_cm, d.corners, frame.depth, min_fraction=cfg.depth_min_fraction, depth_range=cfg.depth_range
+            )
+        out.append(
+            MarkerObservation(
+                id=d.id,
+                T_map_marker=T_map_cam @ T_cm,
+                T_camera_marker=T_cm,
+                corners=d.corners,
+                reprojection_error=err,
+                distance=float(np.linalg.norm(T_cm[:3, 3])),
+                stamp=frame.stamp,
+                depth_refined=refined,
+            )
+        )
+    return out
+
