@@ -80,10 +80,11 @@ def wait(ctx: SkillContext, seconds: float) -> Gen:
     ],
 )
 def report(ctx: SkillContext, message: str, level: str = "info") -> Gen:
-    """Write ``message`` to the event log (event ``report``) and the Python log; succeed."""
+    """Write ``message`` to the event log (event ``report``; ``mmexec run`` also prints
+    it) and, at debug level, to the Python log; succeed at once."""
     yield from ()
     ctx.emit("report", message=message, level=level, node=ctx.node_path)
-    log.log(logging.getLevelName(level.upper()), "%s", message)
+    log.debug("report (%s): %s", level, message)
     return {}
 
 

@@ -1,0 +1,422 @@
+"""The ``mmexec`` command line (see docs/cli.md).
+
+Exit codes:
+
+* 0: success (``run``: every request succeeded);
+* 1: ``run``: at least one request failed, timed out or raised; also a backend that
+  would not start (a serial port that does not open) and internal errors;
+* 2: bad input (missing file, bad YAML, bad config or mission, a mission needing a
+  capability the configured robot lacks, bad ``--request``, unknown skill module, bad
+  command line), with one line per problem on stderr and no traceback;
+* 130: interrupted (Ctrl-C): the tree was halted, the robot left safe, the log flushed.
+
+An unexpected exception prints ``mmexec: internal error: ...`` (one line, with the log
+path when a run had started) and exits 1; ``MMEXEC_DEBUG=1`` shows the traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib.resources
+import logging
+import os
+import sys
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NoReturn
+
+from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
+
+__all__ = ["main"]
+
+EXIT_OK, EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+#: The requests ``mmexec demo`` serves.
+DEMO_REQUESTS: tuple[dict[str, str], ...] = ({"item": "1"}, {"item": "2"})
+
+
+@dataclass(frozen=True)
+class ArgMark(Mark):
+    """Where a command-line value came from, printed as ``--request #2``."""
+
+    def __str__(self) -> str:
+        return f"{self.file} #{self.line}"
+
+
+class UsageError(Exception):
+    """A bad command line (printed as one line, exit 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="mmexec", description="Behaviour-tree mission executive for mobile manipulators.")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+
+    v = sub.add_parser("validate", help="check a mission (exit 0 valid, 2 problems)")
+    v.add_argument("mission", type=Path)
+    v.add_argument("--config", type=Path, help="also load its skill modules and check the robot has what the skills need")
+
+    s = sub.add_parser("show", help="print the compiled tree; export it as Graphviz dot / SVG")
+    s.add_argument("mission", type=Path)
+    s.add_argument("--config", type=Path, help="load this config's skill modules first")
+    s.add_argument("--dot", type=Path, metavar="FILE")
+    s.add_argument("--svg", type=Path, metavar="FILE")
+
+    r = sub.add_parser("run", help="serve requests with a mission on the configured backend")
+    r.add_argument("mission", type=Path)
+    r.add_argument("--config", type=Path, required=True)
+    r.add_argument("--request", action="append", nargs="+", default=[], metavar="K=V",
+                   help="one request (repeat the option for more); several K=V fields per request")
+    r.add_argument("--requests", type=Path, metavar="FILE", help="YAML list of request mappings (served after --request ones)")
+    r.add_argument("--param", action="append", default=[], metavar="K=V", help="override a mission parameter")
+    r.add_argument("--seed", type=int)
+    r.add_argument("--log", type=Path, metavar="FILE", help="event log (default mmexec-logs/<mission>-<time>.jsonl)")
+    r.add_argument("--rate", type=float, metavar="HZ", help="tick rate, overrides the config's rate_hz")
+    r.add_argument("--request-timeout", type=float, metavar="S", help="halt a request after S clock seconds")
+    r.add_argument("--watch", action="store_true", help="reload the mission between requests when it changes")
+    r.add_argument("--gui", action="store_true", help="show the simulator window (sim backend)")
+    r.add_argument("--record", type=Path, metavar="FILE", help="record a video (sim backend)")
+
+    lg = sub.add_parser("log", help="read an event log")
+    lsub = lg.add_subparsers(dest="log_command", metavar="ACTION", parser_class=_Parser)
+    ls = lsub.add_parser("summary", help="requests, outcomes, recoveries, durations, failure reasons")
+    ls.add_argument("file", type=Path)
+    lr = lsub.add_parser("replay", help="re-render the tree's states step by step")
+    lr.add_argument("file", type=Path)
+    lr.add_argument("--step", action="store_true", help="wait for Enter between steps")
+    lr.add_argument("--request", type=int, metavar="N", help="only request N (1-based)")
+
+    sub.add_parser("demo", help="run the embedded demo (mock backend, two requests)")
+    sub.add_parser("hw", help="hardware bring-up tools (mmexec hw --help)", add_help=False)
+    return p
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _kv(token: str, what: str, mark: Mark) -> tuple[str, str]:
+    key, sep, value = token.partition("=")
+    if not sep or not key.strip():
+        raise InputError.at(mark, f"{what}: expected KEY=VALUE, got {token!r}")
+    return key.strip(), value
+
+
+def _cli_requests(groups: Sequence[Sequence[str]]) -> list[Any]:
+    from mmexec.executive.runner import Request
+
+    out = []
+    problems: list[Problem] = []
+    for i, group in enumerate(groups, start=1):
+        mark = ArgMark("--request", i, 1)
+        fields: dict[str, str] = {}
+        for tok in group:
+            try:
+                k, v = _kv(tok, "request", mark)
+            except InputError as e:
+                problems.extend(e.problems)
+                continue
+            if k in fields:
+                problems.append(Problem(mark, f"request: field {k!r} given twice"))
+            fields[k] = v
+        out.append(Request(fields, mark))
+    if problems:
+        raise InputError(problems)
+    return out
+
+
+def _file_requests(path: Path) -> list[Any]:
+    from mmexec.executive.runner import Request
+
+    data = load_yaml(path)
+    top = getattr(data, "mark", Mark(str(path), 1, 1))
+    if not isinstance(data, YList):
+        raise InputError.at(top, "expected a YAML list of request mappings, e.g. '- {item: 3}'")
+    problems: list[Problem] = []
+    out = []
+    for i, item in enumerate(data):
+        mark = data.item_mark(i)
+        if not isinstance(item, YDict):
+            problems.append(Problem(mark, f"request {i + 1}: expected a mapping of request fields, got {item!r}"))
+            continue
+        bad = [k for k, v in item.items() if isinstance(v, (dict, list))]
+        for k in bad:
+            problems.append(Problem(item.value_mark(k), f"request {i + 1}: field {k!r}: expected a scalar value"))
+        out.append(Request(dict(item), mark))
+    if problems:
+        raise InputError(problems)
+    return out
+
+
+@contextlib.contextmanager
+def _quiet_stderr_fd() -> Iterator[None]:
+    """Silence file descriptor 2 (C-level prints such as pybullet's build banner)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            try:
+                yield
+            finally:
+                os.dup2(saved, 2)
+    finally:
+        os.close(saved)
+
+
+def _preload_backend_quietly(backend: str) -> None:
+    """Import pybullet with its banner suppressed before the sim backend imports it."""
+    if backend != "sim" or "pybullet" in sys.modules:
+        return
+    try:
+        with _quiet_stderr_fd():
+            import pybullet  # noqa: F401
+    except ImportError:
+        return  # the backend factory reports the missing module properly
+
+
+def _load_for_mission(config: Path | None) -> Any:
+    from mmexec.executive.config import load_config, load_skill_modules
+
+    loaded = load_config(config) if config is not None else None
+    load_skill_modules(loaded)
+    return loaded
+
+
+def _walk_specs(root: Any) -> Iterator[Any]:
+    """Every NodeSpec reachable from ``root`` (children, options, included files)."""
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        if node is None or id(node) in seen:
+            continue
+        seen.add(id(node))
+        if hasattr(node, "kind") and hasattr(node, "mark"):
+            yield node
+            stack.extend(getattr(node, "children", []) or [])
+            for value in (getattr(node, "opts", {}) or {}).values():
+                items = value if isinstance(value, (list, tuple)) else [value]
+                for it in items:
+                    if hasattr(it, "kind") and hasattr(it, "mark"):
+                        stack.append(it)
+                    elif hasattr(it, "tree") and hasattr(it, "includes"):
+                        stack.append(it.tree)
+
+
+def _check_binding(mission: Any, loaded: Any) -> None:
+    """InputError for each skill leaf needing a capability the configured robot lacks."""
+    from mmexec.executive.config import build_robot, robot_capabilities
+    from mmexec.skills.base import SkillSpec
+
+    _preload_backend_quietly(loaded.backend)
+    robot = build_robot(loaded, seed=None, options={"gui": False, "record": None})
+    try:
+        caps = robot_capabilities(robot)
+    finally:
+        robot.close()
+    problems: list[Problem] = []
+    for spec in _walk_specs(mission.root_file.tree):
+        skill = (getattr(spec, "opts", {}) or {}).get("skill")
+        if not isinstance(skill, SkillSpec):
+            continue
+        for need in skill.needs:
+            if need not in caps:
+                problems.append(Problem(spec.mark, f"skill {skill.name!r} needs a {need}, and backend "
+                                                   f"{loaded.backend!r} in {loaded.path} has none"))
+    if problems:
+        raise InputError(problems)
+
+
+# --------------------------------------------------------------------------- commands
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from mmexec.executive.compiler import load_mission
+
+    loaded = _load_for_mission(args.config)
+    mission = load_mission(args.mission)
+    if loaded is not None:
+        _check_binding(mission, loaded)
+    print(f"{args.mission}: ok ({mission.node_count} nodes"
+          + (f", binds to backend {loaded.backend!r}" if loaded is not None else "") + ")")
+    return EXIT_OK
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from mmexec.executive import display
+    from mmexec.executive.compiler import load_mission
+
+    _load_for_mission(args.config)
+    mission = load_mission(args.mission)
+    tree = mission.display_tree()
+    print(display.render_text(tree))
+    for path, writer in ((args.dot, display.write_dot), (args.svg, display.write_svg)):
+        if path is None:
+            continue
+        try:
+            writer(tree, path)
+        except OSError as e:
+            raise InputError.at(Mark(str(path), 1, 1), f"cannot write: {e.strerror or e}") from None
+        print(f"wrote {path}")
+    return EXIT_OK
+
+
+def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namespace | None,
+         argv: Sequence[str]) -> int:
+    from mmexec.executive.config import load_config
+    from mmexec.executive.runner import RunOptions, Runner
+
+    params: dict[str, Any] = {}
+    if args is not None:
+        for i, tok in enumerate(args.param, start=1):
+            k, v = _kv(tok, "param", ArgMark("--param", i, 1))
+            params[k] = v
+    opts = RunOptions(mission=mission, config=config, requests=requests, params=params, argv=list(argv))
+    if args is not None:
+        opts.seed, opts.log_path, opts.rate_hz = args.seed, args.log, args.rate
+        opts.watch, opts.gui, opts.record = args.watch, args.gui, args.record
+        opts.request_timeout = args.request_timeout
+        if opts.request_timeout is not None and opts.request_timeout <= 0:
+            raise InputError.at(ArgMark("--request-timeout", 1, 1), "expected seconds > 0")
+    _preload_backend_quietly(load_config(config).backend)
+    runner = Runner(opts)
+    runner.prepare()
+    if params:
+        try:
+            runner.mission.resolve_params(params)
+        except ValueError as e:
+            raise InputError.at(ArgMark("--param", 1, 1), str(e)) from None
+    _CURRENT_LOG[0] = opts.log_path
+    try:
+        return runner.run()
+    finally:
+        _CURRENT_LOG[0] = runner.log_path
+
+
+def _cmd_run(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    requests = _cli_requests(args.request)
+    if args.requests is not None:
+        requests += _file_requests(args.requests)
+    return _run(args.mission, args.config, requests, args, argv)
+
+
+def _cmd_demo(argv: Sequence[str]) -> int:
+    from mmexec.executive.runner import Request
+
+    mission_res = importlib.resources.files("mmexec.trees").joinpath("demo_mock.yaml")
+    config_res = importlib.resources.files("mmexec.config").joinpath("mock.yaml")
+    with importlib.resources.as_file(mission_res) as mission, importlib.resources.as_file(config_res) as config:
+        print(f"mmexec demo: {mission.name} on the mock backend ({config.name}), {len(DEMO_REQUESTS)} requests")
+        reqs = [Request(dict(r), ArgMark("demo request", i, 1)) for i, r in enumerate(DEMO_REQUESTS, start=1)]
+        ns = argparse.Namespace(param=[], seed=0, log=None, rate=None, watch=False, gui=False, record=None,
+                                request_timeout=None)
+        return _run(mission, config, reqs, ns, argv)
+
+
+def _cmd_log(args: argparse.Namespace) -> int:
+    from mmexec.executive.eventlog import LogFormatError, read_log
+    from mmexec.executive.logtools import render_frame, replay_frames, summary
+
+    try:
+        records = read_log(args.file)
+    except FileNotFoundError:
+        raise InputError.at(Mark(str(args.file), 1, 1), "no such file") from None
+    except IsADirectoryError:
+        raise InputError.at(Mark(str(args.file), 1, 1), "is a directory, expected an event log") from None
+    except LogFormatError as e:
+        raise UsageError(str(e)) from None
+    if args.log_command == "summary":
+        print(summary(records))
+        return EXIT_OK
+    count = 0
+    for frame in replay_frames(records, request=args.request):
+        if count:
+            if args.step and sys.stdin.isatty():
+                try:
+                    input("[Enter: next step, Ctrl-D: stop] ")
+                except EOFError:
+                    print()
+                    break
+            print()
+        print(render_frame(frame))
+        count += 1
+    if count == 0:
+        print("no node_status records to replay" + (f" for request {args.request}" if args.request else ""))
+    return EXIT_OK
+
+
+def _cmd_hw(rest: Sequence[str]) -> int:
+    import importlib
+
+    try:
+        hwcli = importlib.import_module("mmexec.drivers.hwcli")
+    except ModuleNotFoundError as e:
+        if e.name in ("mmexec.drivers.hwcli",):
+            raise UsageError("mmexec hw: hardware tools are not available in this installation "
+                             "(module mmexec.drivers.hwcli not found)") from None
+        raise
+    return int(hwcli.main(list(rest)))
+
+
+_CURRENT_LOG: list[Path | None] = [None]
+
+
+def _dispatch(argv: list[str]) -> int:
+    if argv and argv[0] == "hw":
+        return _cmd_hw(argv[1:])
+    args = _parser().parse_args(argv)
+    if args.command is None:
+        _parser().print_help()
+        return EXIT_INPUT
+    if args.command == "validate":
+        return _cmd_validate(args)
+    if args.command == "show":
+        return _cmd_show(args)
+    if args.command == "run":
+        return _cmd_run(args, argv)
+    if args.command == "log":
+        if args.log_command is None:
+            raise UsageError("mmexec log: expected 'summary FILE' or 'replay FILE'")
+        return _cmd_log(args)
+    if args.command == "demo":
+        return _cmd_demo(argv)
+    raise UsageError(f"mmexec: unknown command {args.command!r}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``mmexec`` command; returns the exit code."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    logging.basicConfig(level=logging.DEBUG if os.environ.get("MMEXEC_DEBUG") else logging.WARNING,
+                        format="mmexec: %(levelname)s: %(name)s: %(message)s")
+    _CURRENT_LOG[0] = None
+    from mmexec.executive.runner import BackendStartError
+
+    try:
+        return _dispatch(args)
+    except InputError as e:
+        for p in e.problems:
+            print(str(p), file=sys.stderr)
+        return EXIT_INPUT
+    except UsageError as e:
+        print(str(e), file=sys.stderr)
+        return EXIT_INPUT
+    except BackendStartError as e:
+        print(f"mmexec: {e}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("mmexec: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as e:  # noqa: BLE001 - the documented last-resort boundary of the CLI
+        if os.environ.get("MMEXEC_DEBUG"):
+            raise
+        where = f" (log: {_CURRENT_LOG[0]})" if _CURRENT_LOG[0] else ""
+        msg = str(e).splitlines()[0] if str(e) else ""
+        print(f"mmexec: internal error: {type(e).__name__}: {msg}{where}; set MMEXEC_DEBUG=1 for details",
+              file=sys.stderr)
+        return EXIT_FAILED

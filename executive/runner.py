@@ -1,0 +1,524 @@
+"""The runner: build the backend, load the mission, serve requests one at a time.
+
+For each request the runner instantiates a fresh tree from the mission, ticks it at
+``rate_hz`` of clock time (``robot.spin(1 / rate_hz)`` between ticks: the sim steps
+physics, the robot sleeps to the period boundary, the mock advances its clock) until it
+succeeds or fails, and records everything in the event log. A failed or given-up request
+does not stop the queue. The runner itself never sleeps and never reads the wall clock
+for timing, except to bound how long a Ctrl-C stop may take.
+
+Stopping: :meth:`Runner.interrupt` (the SIGINT handler calls it) asks the running tree
+to halt; the runner keeps ticking until the tree has stopped (every running skill
+cancelled, the hardware left safe), bounded by :attr:`RunOptions.halt_wall_limit`
+seconds of wall time, after which it calls ``robot.safe_stop()``. A second Ctrl-C skips
+the wait. Then it closes the robot, writes ``run_end`` and returns exit code 130.
+
+Exit codes of :meth:`Runner.run`: 0 every request succeeded, 1 any failed, 130
+interrupted. Bad input (config, mission, requests) raises
+:class:`~mmexec.config.yamlload.InputError` from :meth:`Runner.prepare` (the CLI turns it
+into exit code 2).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import platform
+import shutil
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+from typing import Any, TextIO
+
+import py_trees
+
+from mmexec.config.yamlload import InputError, Mark, Problem
+from mmexec.drivers.interfaces import Robot
+from mmexec.executive.config import LoadedConfig, build_robot, load_config, load_skill_modules
+from mmexec.executive.eventlog import EventLog
+from mmexec.skills.base import REGISTRY, SkillRegistry
+
+__all__ = [
+    "BackendStartError",
+    "EXIT_FAILED",
+    "EXIT_INPUT",
+    "EXIT_INTERRUPTED",
+    "EXIT_OK",
+    "Progress",
+    "Request",
+    "RequestResult",
+    "RunOptions",
+    "Runner",
+    "default_log_path",
+]
+
+log = logging.getLogger(__name__)
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+Status = py_trees.common.Status
+
+
+class BackendStartError(RuntimeError):
+    """The configured backend could not be built or connected (not an input error)."""
+
+
+@dataclass(frozen=True)
+class Request:
+    """One request: its fields (strings from the command line, typed values from a
+    requests file) and where it came from, for error messages."""
+
+    fields: Mapping[str, Any]
+    mark: Mark
+
+
+@dataclass
+class RunOptions:
+    """What ``mmexec run`` was asked to do.
+
+    ``rate_hz`` overrides the config's tick rate; ``request_timeout`` [clock s] halts a
+    request that runs longer (outcome ``timeout``); ``halt_wall_limit`` [wall s] bounds
+    how long a Ctrl-C stop may take before ``robot.safe_stop()``.
+    """
+
+    mission: Path
+    config: Path
+    requests: list[Request] = field(default_factory=list)
+    params: dict[str, Any] = field(default_factory=dict)
+    seed: int | None = None
+    log_path: Path | None = None
+    rate_hz: float | None = None
+    watch: bool = False
+    gui: bool = False
+    record: Path | None = None
+    request_timeout: float | None = None
+    halt_wall_limit: float = 5.0
+    argv: list[str] = field(default_factory=list)
+
+
+@dataclass
+class RequestResult:
+    """Outcome of one request: ``success``, ``failure``, ``timeout``, ``interrupted`` or
+    ``error`` (an exception escaped the tree); ``duration`` in clock seconds."""
+
+    index: int
+    request: dict[str, Any]
+    outcome: str
+    duration: float
+    recoveries: int = 0
+    skill_failures: int = 0
+    reason: str = ""
+    failure_kind: str = ""
+    failure_node: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return self.outcome == "success"
+
+
+def default_log_path(mission: Path) -> Path:
+    """``mmexec-logs/<mission stem>-<UTC date-time>.jsonl`` under the current directory."""
+    stamp = EventLog.wall_time().replace(":", "").replace("-", "").replace("+0000", "Z").replace("+00:00", "Z")
+    return Path("mmexec-logs") / f"{mission.stem}-{stamp}.jsonl"
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for dist in ("mmexec", "py_trees", "pybullet"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = "not installed"
+    return out
+
+
+def _file_sha256(paths: Sequence[Path | str]) -> str:
+    h = hashlib.sha256()
+    for p in paths:
+        try:
+            h.update(Path(p).read_bytes())
+        except OSError as e:  # a deleted include is a change too; the reload reports it
+            h.update(f"<unreadable {p}: {e.strerror}>".encode())
+    return h.hexdigest()
+
+
+class Progress:
+    """A single updating status line on a terminal (nothing when ``stream`` is not a
+    TTY). Redraws at most every ``interval`` wall seconds."""
+
+    def __init__(self, stream: TextIO, *, enabled: bool | None = None, interval: float = 0.1) -> None:
+        self.stream = stream
+        self.enabled = stream.isatty() if enabled is None else enabled
+        self.interval = interval
+        self._last = -1e9
+        self._shown = False
+
+    def update(self, text: str, *, force: bool = False) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if not force and now - self._last < self.interval:
+            return
+        self._last = now
+        width = shutil.get_terminal_size((100, 20)).columns
+        if len(text) >= width:
+            text = text[: max(10, width - 2)] + "…"
+        self.stream.write("\r" + text + "\x1b[K")
+        self.stream.flush()
+        self._shown = True
+
+    def clear(self) -> None:
+        if self.enabled and self._shown:
+            self.stream.write("\r\x1b[K")
+            self.stream.flush()
+            self._shown = False
+
+
+class Runner:
+    """Serves a queue of requests with one mission on one backend (see the module doc).
+
+    ``out`` receives one line per request and the final summary; ``err`` receives
+    reload problems; ``progress`` draws the live status line (default: on ``out`` when
+    it is a terminal). Construct, then :meth:`prepare` (loads and checks all input,
+    raising InputError), then :meth:`run`.
+    """
+
+    def __init__(
+        self,
+        options: RunOptions,
+        *,
+        out: TextIO | None = None,
+        err: TextIO | None = None,
+        progress: Progress | None = None,
+        registry: SkillRegistry = REGISTRY,
+        robot_factory: Callable[[LoadedConfig], Robot] | None = None,
+    ) -> None:
+        self.options = options
+        self.out = out if out is not None else sys.stdout
+        self.err = err if err is not None else sys.stderr
+        self.progress = progress if progress is not None else Progress(self.out)
+        self.registry = registry
+        self.robot_factory = robot_factory
+        self.results: list[RequestResult] = []
+        self.config: LoadedConfig | None = None
+        self.mission: Any = None
+        self.robot: Robot | None = None
+        self.log: EventLog | None = None
+        self.log_path: Path | None = None
+        self._requests: list[dict[str, Any]] = []
+        self._interrupts = 0
+        self._lock = threading.Lock()
+        self._mission_digest = ""
+        self._rejected_digest = ""
+        self._recoveries = 0
+        self._skill_failures = 0
+
+    # ------------------------------------------------------------------ input
+
+    def prepare(self) -> None:
+        """Load the config and its skill modules, the mission, and check every request.
+        Raises InputError (all problems found) on bad input."""
+        from mmexec.executive.compiler import load_mission
+
+        opts = self.options
+        self.config = load_config(opts.config)
+        load_skill_modules(self.config, self.registry)
+        self.mission = load_mission(opts.mission, registry=self.registry)
+        self._mission_digest = _file_sha256(self._mission_files())
+        self._requests = self._validate_requests(self.mission)
+        if opts.rate_hz is not None and not 0.0 < opts.rate_hz <= 1000.0:
+            raise InputError.at(Mark("--rate", 1, 1), f"tick rate must be in (0, 1000] Hz, got {opts.rate_hz:g}")
+
+    def _validate_requests(self, mission: Any) -> list[dict[str, Any]]:
+        reqs = self.options.requests or [Request({}, Mark("(no --request)", 1, 1))]
+        problems: list[Problem] = []
+        out: list[dict[str, Any]] = []
+        for i, req in enumerate(reqs, start=1):
+            try:
+                out.append(dict(mission.validate_request(dict(req.fields))))
+            except ValueError as e:
+                problems.append(Problem(req.mark, f"request {i}: {e}"))
+        if problems:
+            raise InputError(problems)
+        return out
+
+    def _mission_files(self) -> list[Path]:
+        files = list(getattr(self.mission, "files", None) or [self.options.mission])
+        return [Path(f) for f in files]
+
+    # ------------------------------------------------------------------ control
+
+    def interrupt(self) -> None:
+        """Ask the run to stop (SIGINT handler; safe from a signal or another thread).
+        The first call halts the running tree; a second one stops waiting for it."""
+        with self._lock:
+            self._interrupts += 1
+
+    @property
+    def interrupted(self) -> bool:
+        return self._interrupts > 0
+
+    def _install_sigint(self) -> Callable[[], None]:
+        if threading.current_thread() is not threading.main_thread():
+            return lambda: None
+        previous = signal.getsignal(signal.SIGINT)
+
+        def handler(signum: int, frame: object) -> None:
+            self.interrupt()
+
+        signal.signal(signal.SIGINT, handler)
+        return lambda: signal.signal(signal.SIGINT, previous)
+
+    # ------------------------------------------------------------------ run
+
+    def run(self) -> int:
+        """Serve every request; returns the exit code (0, 1 or 130). Call
+        :meth:`prepare` first. Backend start-up errors propagate (after closing the log)."""
+        if self.mission is None or self.config is None:
+            self.prepare()
+        assert self.config is not None
+        opts = self.options
+        restore = self._install_sigint()
+        self.log_path = opts.log_path if opts.log_path is not None else default_log_path(opts.mission)
+        self.log = EventLog(self.log_path).open()
+        exit_code = EXIT_FAILED
+        outcome = "error"
+        try:
+            try:
+                if self.robot_factory is not None:
+                    self.robot = self.robot_factory(self.config)
+                else:
+                    self.robot = build_robot(self.config, seed=opts.seed,
+                                             options={"gui": opts.gui, "record": opts.record})
+            except InputError:
+                raise
+            except Exception as e:  # noqa: BLE001 - any driver start-up failure, reported in one line
+                raise BackendStartError(f"backend {self.config.backend!r} failed to start: "
+                                        f"{type(e).__name__}: {e}") from e
+            robot = self.robot
+            self.log.clock = robot.clock.now
+            self.log.add_listener(self._count_events)
+            rate = opts.rate_hz if opts.rate_hz is not None else self.config.config.rate_hz
+            self.log.write(
+                "run_start",
+                started=EventLog.wall_time(),
+                mission=str(opts.mission),
+                mission_sha256=self.mission.sha256,
+                mission_name=getattr(self.mission, "name", ""),
+                config=str(self.config.path),
+                config_sha256=self.config.sha256,
+                backend=self.config.backend,
+                seed=opts.seed,
+                rate_hz=rate,
+                requests=len(self._requests),
+                argv=list(opts.argv),
+                versions=_versions(),
+                pid=os.getpid(),
+            )
+            from mmexec.executive.context import ExecContext
+
+            ctx = ExecContext(robot=robot, clock=robot.clock, registry=self.registry, emit=self.log.emit,
+                              world={}, profile=dict(self.config.config.profile))
+            n = len(self._requests)
+            for i in range(n):
+                if self.interrupted:
+                    break
+                if i > 0 and opts.watch:
+                    self._maybe_reload(i)
+                result = self._serve(ctx, i + 1, n, self._requests[i], 1.0 / rate)
+                self.results.append(result)
+                self._print_result(result, n)
+            ok = sum(r.ok for r in self.results)
+            failed = len(self.results) - ok
+            if self.interrupted:
+                exit_code, outcome = EXIT_INTERRUPTED, "interrupted"
+            elif failed == 0 and len(self.results) == n:
+                exit_code, outcome = EXIT_OK, "ok"
+            else:
+                exit_code, outcome = EXIT_FAILED, "failed"
+            self.log.write("run_end", outcome=outcome, requests=n, served=len(self.results), succeeded=ok,
+                           failed=failed, duration=robot.clock.now(), exit_code=exit_code)
+            self._print_summary(n, ok, failed, outcome)
+            return exit_code
+        except BaseException as e:
+            if self.log is not None and not self.log.closed:
+                self.log.write("run_end", outcome="error", error=f"{type(e).__name__}: {e}",
+                               served=len(self.results), exit_code=EXIT_FAILED)
+            raise
+        finally:
+            self.progress.clear()
+            try:
+                if self.robot is not None:
+                    self.robot.close()
+            finally:
+                if self.log is not None:
+                    self.log.close()
+                restore()
+
+    def _count_events(self, record: dict[str, Any]) -> None:
+        ev = record.get("event")
+        if ev == "recovery_attempt":
+            self._recoveries += 1
+        elif ev in ("skill_failure", "skill_failed"):
+            self._skill_failures += 1
+        elif ev == "report":
+            self.progress.clear()
+            level = record.get("level", "info")
+            print(f"  {'' if level == 'info' else level + ': '}{record.get('message', '')}", file=self.out)
+            self.out.flush()
+
+    def _serve(self, ctx: Any, index: int, total: int, request: dict[str, Any], period: float) -> RequestResult:
+        assert self.robot is not None and self.log is not None
+        robot, elog, opts = self.robot, self.log, self.options
+        self._recoveries = self._skill_failures = 0
+        tree = self.mission.instantiate(ctx, request, params=opts.params or None)
+        t0 = robot.clock.now()
+        elog.write("request_start", index=index, of=total, request=request, mission_sha256=self.mission.sha256,
+                   nodes=[path for path, _ in tree.snapshot()])
+
+        def on_status(path: str, old: Any, new: Any) -> None:
+            elog.write("node_status", path=path, old=old, new=new)
+
+        tree.add_status_listener(on_status)
+        halt_reason = ""
+        wall_deadline = 0.0
+        seen_interrupts = 0
+        status = Status.RUNNING
+        try:
+            while True:
+                if self._interrupts > seen_interrupts:
+                    seen_interrupts = self._interrupts
+                    if halt_reason != "interrupt":
+                        halt_reason = "interrupt"
+                        if not tree.halting:
+                            tree.request_halt()
+                        wall_deadline = time.monotonic() + opts.halt_wall_limit
+                        elog.write("halt", reason="interrupt", index=index)
+                    if seen_interrupts >= 2:
+                        elog.write("halt_abandoned", reason="second interrupt", index=index)
+                        robot.safe_stop()
+                        break
+                elif (opts.request_timeout is not None and not halt_reason
+                      and robot.clock.now() - t0 > opts.request_timeout):
+                    halt_reason = "timeout"
+                    tree.request_halt()
+                    wall_deadline = time.monotonic() + opts.halt_wall_limit
+                    elog.write("halt", reason="timeout", index=index, limit=opts.request_timeout)
+                status = tree.tick()
+                self.progress.update(
+                    f"[{index}/{total}] {robot.clock.now() - t0:7.1f} s  "
+                    f"{'stopping ' if halt_reason else ''}{tree.tip_path() or '-'}"
+                )
+                if halt_reason:
+                    if tree.stopped:
+                        break
+                    if time.monotonic() > wall_deadline:
+                        elog.write("halt_abandoned", reason=f"tree still stopping after {opts.halt_wall_limit:g} s",
+                                   index=index)
+                        robot.safe_stop()
+                        break
+                elif status in (Status.SUCCESS, Status.FAILURE):
+                    break
+                robot.spin(period)
+        except Exception as e:  # noqa: BLE001 - a bug in a skill or node: this request ends, the queue goes on
+            log.error("request %d: %s", index, e, exc_info=log.isEnabledFor(logging.DEBUG))
+            robot.safe_stop()
+            result = RequestResult(index, request, "error", robot.clock.now() - t0, self._recoveries,
+                                   self._skill_failures, reason=f"{type(e).__name__}: {e}")
+            self._end(result)
+            return result
+        bb = tree.blackboard()
+        if halt_reason == "interrupt":
+            outcome = "interrupted"
+        elif halt_reason == "timeout":
+            outcome = "timeout"
+        else:
+            outcome = "success" if status is Status.SUCCESS else "failure"
+        reason, kind, node = "", "", ""
+        if outcome == "timeout":
+            reason, kind = f"request took longer than {opts.request_timeout:g} s", "timeout"
+        elif outcome == "interrupted":
+            reason, kind = "interrupted (Ctrl-C)", "cancelled"
+        elif outcome == "failure":
+            reason = str(bb.get("last_failure", "") or "")
+            kind = str(bb.get("last_failure_kind", "") or "")
+            node = str(bb.get("last_failure_node", "") or "")
+        result = RequestResult(index, request, outcome, robot.clock.now() - t0, self._recoveries,
+                               self._skill_failures, reason, kind, node)
+        self._end(result)
+        return result
+
+    def _end(self, r: RequestResult) -> None:
+        assert self.log is not None
+        self.log.write("request_end", index=r.index, request=r.request, outcome=r.outcome, duration=r.duration,
+                       recoveries=r.recoveries, skill_failures=r.skill_failures, reason=r.reason,
+                       failure_kind=r.failure_kind, failure_node=r.failure_node)
+
+    def _maybe_reload(self, next_index: int) -> None:
+        """``--watch``: reload the mission if any of its files changed (between requests)."""
+        from mmexec.executive.compiler import load_mission
+
+        assert self.log is not None
+        digest = _file_sha256(self._mission_files())
+        if digest == self._mission_digest or digest == self._rejected_digest:
+            return
+        self.progress.clear()
+        try:
+            mission = load_mission(self.options.mission, registry=self.registry)
+            remaining = self._validate_with(mission, next_index)
+        except InputError as e:
+            self._rejected_digest = digest
+            lines = [str(p) for p in e.problems]
+            self.log.write("mission_reload", ok=False, problems=lines)
+            print(f"mmexec: {self.options.mission} changed but has errors; still running the previous version:",
+                  file=self.err)
+            for line in lines:
+                print(line, file=self.err)
+            self.err.flush()
+            return
+        self.mission = mission
+        self._mission_digest = _file_sha256(self._mission_files())
+        self._rejected_digest = ""
+        self._requests[next_index:] = remaining
+        self.log.write("mission_reload", ok=True, mission_sha256=mission.sha256)
+        print(f"mmexec: reloaded {self.options.mission} (sha256 {mission.sha256[:12]})", file=self.out)
+        self.out.flush()
+
+    def _validate_with(self, mission: Any, start: int) -> list[dict[str, Any]]:
+        reqs = self.options.requests or [Request({}, Mark("(no --request)", 1, 1))]
+        problems: list[Problem] = []
+        out: list[dict[str, Any]] = []
+        for i in range(start, len(reqs)):
+            try:
+                out.append(dict(mission.validate_request(dict(reqs[i].fields))))
+            except ValueError as e:
+                problems.append(Problem(reqs[i].mark, f"request {i + 1}: {e}"))
+        if problems:
+            raise InputError(problems)
+        return out
+
+    # ------------------------------------------------------------------ output
+
+    def _print_result(self, r: RequestResult, total: int) -> None:
+        self.progress.clear()
+        req = ", ".join(f"{k}={v}" for k, v in r.request.items()) or "-"
+        rec = f", {r.recoveries} recover{'y' if r.recoveries == 1 else 'ies'}" if r.recoveries else ""
+        line = f"request {r.index}/{total} ({req}): {r.outcome} after {r.duration:.1f} s{rec}"
+        if r.reason:
+            line += f": {r.reason}" + (f" [{r.failure_node}]" if r.failure_node else "")
+        print(line, file=self.out)
+        self.out.flush()
+
+    def _print_summary(self, n: int, ok: int, failed: int, outcome: str) -> None:
+        extra = f", {n - ok - failed} not served" if ok + failed < n else ""
+        print(f"{ok}/{n} requests succeeded, {failed} failed{extra} ({outcome}); log: {self.log_path}", file=self.out)
+        self.out.flush()
