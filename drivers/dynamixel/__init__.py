@@ -1,0 +1,7 @@
+"""Interbotix WX250s arm (and LoCoBot pan/tilt) over DYNAMIXEL Protocol 2.0.
+
+Layers: :mod:`.codec` (pure framing), :mod:`.control_table` (register maps as data, unit
+conversions, fault names), :mod:`.bus` (half-duplex bus with link-derived deadlines),
+:mod:`.wx250s` (the arm device, its I/O thread and the Arm/Gripper adapters),
+:mod:`.bringup` (``mmexec hw ping|fake dynamixel``). See docs/drivers/dynamixel.md.
+"""

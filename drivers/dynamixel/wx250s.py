@@ -1,0 +1,956 @@
+"""Interbotix WidowX-250 6DOF (wx250s) arm and gripper, optionally with LoCoBot pan/tilt.
+
+:class:`WX250s` owns one :class:`~mmexec.drivers.dynamixel.bus.DxlBus` and an I/O thread.
+Construction does no I/O. :meth:`WX250s.connect` runs the Interbotix bring-up (ping every
+configured id with 3 attempts, torque off, EEPROM settings, operating modes, profiles, goal =
+present position, torque on) and starts the thread. Each control cycle (``rate_hz``, 100 Hz
+by default) the thread does one Sync Write of Goal Position for the position-controlled
+joint ids (shadows follow through their Secondary ID) and one Sync Read of 12 bytes from
+address 126 (current/load, velocity, position) for the joint ids, then advances the goals:
+
+* trajectories are streamed as timed waypoints, linearly interpolated every cycle (from the
+  position at start to the first waypoint, then between waypoints); the goal succeeds once
+  the last waypoint is reached within ``tolerance`` [rad] and fails if that takes more than
+  ``settle_timeout`` [s] beyond the trajectory's duration;
+* joint-range and velocity limits are checked in :meth:`WX250s.follow` before anything is
+  sent: a violating trajectory gives a FAILED goal naming the joint, and nothing moves;
+* a status with the hardware alert bit makes the thread read Hardware Error Status and fail
+  the running goals with the named fault (``overload``, ``overheating``, ``input_voltage``,
+  ``motor_encoder``, ``electrical_shock``); :meth:`WX250s.reboot` / :meth:`WX250s.smart_reboot`
+  clear it on request;
+* cancel holds the present position (goal = present) and then marks the goal CANCELLED;
+  :meth:`WX250s.close` holds, stops the thread and closes the port (torque stays on unless
+  ``torque_off_on_close``);
+* a lost port fails the running goals with "link lost" and ends the thread.
+
+Positions are radians with 2048 pulses = 0 rad, velocities rad/s, efforts in amperes (XM
+servos) or fraction of maximum torque (XL430); the gripper width is metres between the
+finger pads, from the servo angle through the horn/arm linkage of hardware-protocols.md 2.5.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from mmexec.drivers.dynamixel import codec
+from mmexec.drivers.dynamixel.bus import (
+    BusConfig,
+    DxlBus,
+    DxlLinkError,
+    DynamixelError,
+    HardwareFault,
+    LinkLost,
+    NoReply,
+    NotConnected,
+    PingInfo,
+)
+from mmexec.drivers.dynamixel.codec import Status
+from mmexec.drivers.dynamixel.control_table import (
+    MODELS,
+    XL430_W250,
+    XM430_W350,
+    Model,
+    OperatingMode,
+    current_to_amps,
+    decode_hardware_error,
+    load_to_fraction,
+    pulses_to_rad,
+    rad_to_pulses,
+    velocity_to_rad_s,
+)
+from mmexec.drivers.interfaces import (
+    Arm,
+    Clock,
+    GraspState,
+    Goal,
+    GoalState,
+    Gripper,
+    GripperState,
+    JointLimit,
+    JointState,
+    JointTrajectory,
+)
+
+__all__ = [
+    "ARM_JOINTS",
+    "CycleIO",
+    "GRIPPER",
+    "JointSpec",
+    "LOCOBOT_MOUNT",
+    "PAN_TILT",
+    "ServoReading",
+    "WX250s",
+    "WX250sArm",
+    "WX250sConfig",
+    "WX250sGripper",
+    "finger_offset",
+    "gripper_angle_for_width",
+    "gripper_width",
+]
+
+log = logging.getLogger(__name__)
+
+PRESENT_ADDR = 126
+PRESENT_LEN = 12
+GOAL_POSITION = 116
+GOAL_PWM = 100
+TORQUE_ENABLE = 64
+HW_ERROR = 70
+
+# --------------------------------------------------------------------------- arm description
+
+
+@dataclass(frozen=True)
+class JointSpec:
+    """One joint: servo ``id``, model, optional ``shadow`` id, drive direction, register
+    limits [pulses], URDF limits [rad], velocity [rad/s] and effort [N m]."""
+
+    name: str
+    id: int
+    model: Model
+    min_pulses: int
+    max_pulses: int
+    lower: float
+    upper: float
+    velocity: float = math.pi
+    effort: float = math.inf
+    reversed: bool = False
+    shadow: int | None = None
+
+    def limit(self) -> JointLimit:
+        return JointLimit(self.name, self.lower, self.upper, self.velocity, effort=self.effort)
+
+
+_PI = math.pi - 1e-5
+ARM_JOINTS: tuple[JointSpec, ...] = (
+    JointSpec("waist", 1, XM430_W350, 0, 4095, -_PI, _PI, effort=10.0),
+    JointSpec("shoulder", 2, XM430_W350, 819, 3345, -1.88496, 1.98968, effort=20.0, shadow=3),
+    JointSpec("elbow", 4, XM430_W350, 648, 3094, -2.14675, 1.60570, effort=15.0, shadow=5),
+    JointSpec("forearm_roll", 6, XM430_W350, 0, 4095, -_PI, _PI, effort=2.0),
+    JointSpec("wrist_angle", 7, XM430_W350, 910, 3447, -1.74533, 2.14675, effort=5.0, reversed=True),
+    JointSpec("wrist_rotate", 8, XL430_W250, 0, 4095, -_PI, _PI, effort=1.0),
+)
+GRIPPER = JointSpec("gripper", 9, XL430_W250, 0, 4095, -math.pi, math.pi, effort=1.0)
+PAN_TILT: tuple[JointSpec, ...] = (
+    JointSpec("pan", 10, XL430_W250, 1024, 3072, -math.pi / 2, math.pi / 2, effort=2.0),
+    JointSpec("tilt", 11, XL430_W250, 1024, 3072, -math.pi / 2, 1.309, effort=2.0, reversed=True),
+)
+#: ``T_base_armbase`` of the LoCoBot: arm_base_link in base_link (robots.md 1.2)
+LOCOBOT_MOUNT = (0.097277, 0.0, 0.10795)
+
+# --------------------------------------------------------------------------- gripper geometry
+
+HORN_RADIUS = 0.014   # m
+ARM_LENGTH = 0.024    # m
+FINGER_MIN = 0.015    # m, one finger's travel from the centre
+FINGER_MAX = 0.037    # m
+
+
+def finger_offset(angle: float) -> float:
+    """One finger's distance from the gripper centre [m] for servo ``angle`` [rad]."""
+    rs = HORN_RADIUS * math.sin(angle)
+    return rs + math.sqrt(ARM_LENGTH**2 - (HORN_RADIUS**2 - rs**2))
+
+
+def gripper_width(angle: float) -> float:
+    """Gap between the two finger pads [m] (fingers mirrored) for servo ``angle`` [rad]."""
+    return 2.0 * finger_offset(angle)
+
+
+def gripper_angle_for_width(width: float) -> float:
+    """Servo angle [rad] giving ``width`` [m] (inverse of :func:`gripper_width` on
+    [-pi/2, pi/2], where it is monotonic); raises ValueError outside its range."""
+    lo, hi = -math.pi / 2, math.pi / 2
+    if not gripper_width(lo) <= width <= gripper_width(hi):
+        raise ValueError(f"gripper width {width:.4f} m outside {gripper_width(lo):.4f}..{gripper_width(hi):.4f}")
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if gripper_width(mid) < width:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+# --------------------------------------------------------------------------- one control cycle
+
+
+@dataclass(frozen=True)
+class ServoReading:
+    """Decoded 12 bytes from address 126: position [rad], velocity [rad/s], effort (A for XM
+    current, fraction of max torque for XL430 load), raw ``error`` byte of the status."""
+
+    position: float
+    velocity: float
+    effort: float
+    error: int
+    raw_position: int
+    raw_velocity: int
+    raw_effort: int
+
+
+class CycleIO:
+    """The per-cycle bus traffic: Sync Write Goal Position to ``write_ids``, Sync Read 12
+    bytes at 126 from ``read_ids``. Pure composition of codec + bus, shared by the arm's I/O
+    thread and the benchmark."""
+
+    def __init__(self, bus: DxlBus, write_ids: Sequence[int], read_ids: Sequence[int],
+                 models: dict[int, Model]) -> None:
+        self.bus = bus
+        self.write_ids = tuple(write_ids)
+        self.read_ids = tuple(read_ids)
+        self._has_current = {i: models[i].has_current_sensor for i in read_ids}
+
+    def write_goals(self, pulses: Sequence[int]) -> None:
+        """One Sync Write of Goal Position [pulses], in ``write_ids`` order."""
+        if len(pulses) != len(self.write_ids):
+            raise ValueError(f"expected {len(self.write_ids)} goals, got {len(pulses)}")
+        self.bus.sync_write(GOAL_POSITION, 4, [(i, codec.int_to_le(p, 4)) for i, p in zip(self.write_ids, pulses)])
+
+    def read_state(self) -> dict[int, ServoReading]:
+        """One Sync Read of present current/load, velocity and position."""
+        statuses = self.bus.sync_read(PRESENT_ADDR, PRESENT_LEN, self.read_ids)
+        return {i: self.decode(i, st) for i, st in statuses.items()}
+
+    def decode(self, dxl_id: int, st: Status) -> ServoReading:
+        d = st.data
+        if len(d) < 10:
+            raise DxlLinkError(self.bus.port, f"short state reply from servo id {dxl_id}", dxl_id)
+        eff = int.from_bytes(d[0:2], "little", signed=True)
+        vel = int.from_bytes(d[2:6], "little", signed=True)
+        pos = int.from_bytes(d[6:10], "little", signed=True)
+        effort = current_to_amps(eff) if self._has_current[dxl_id] else load_to_fraction(eff)
+        return ServoReading(pulses_to_rad(pos), velocity_to_rad_s(vel), effort, st.error, pos, vel, eff)
+
+    def cycle(self, pulses: Sequence[int]) -> dict[int, ServoReading]:
+        self.write_goals(pulses)
+        return self.read_state()
+
+
+# --------------------------------------------------------------------------- config
+
+
+@dataclass(frozen=True)
+class WX250sConfig:
+    """Driver settings. Times in seconds unless the name says ms; angles in rad.
+
+    ``latency``: USB adapter latency (1 ms for the U2D2 with the Interbotix udev rule);
+    ``profile_velocity_ms`` / ``profile_acceleration_ms``: the time-based profile written to
+    the arm servos. Interbotix uses 2000 / 300 ms for single set-point moves; this driver
+    streams interpolated waypoints every cycle, so a 100 ms profile (the servo reaches each
+    streamed set-point 0.1 s later, smoothly) is the default. ``shutdown_mask``: Shutdown
+    register value; 0x3D makes all five named faults cut torque and raise the alert bit the
+    driver watches (factory 0x34 would leave input voltage and encoder faults unreported).
+    """
+
+    port: str = "/dev/ttyDXL"
+    baudrate: int = 1_000_000
+    latency: float = 0.001
+    locobot: bool = False
+    rate_hz: float = 100.0
+    write_eeprom: bool = True
+    profile_velocity_ms: int = 100
+    profile_acceleration_ms: int = 30
+    ping_attempts: int = 3
+    tolerance: float = 0.02
+    settle_timeout: float = 1.0
+    max_missed_cycles: int = 3
+    torque_off_on_close: bool = False
+    shutdown_mask: int = 0x3D
+    gripper_pwm_min: int = 150
+    gripper_pwm_max: int = 350
+    gripper_max_force: float = 5.0
+    gripper_load_threshold: float = 0.2
+    gripper_width_tolerance: float = 0.002
+    gripper_timeout: float = 3.0
+
+    def __post_init__(self) -> None:
+        if self.rate_hz <= 0 or self.rate_hz > 1000:
+            raise ValueError(f"rate_hz must be in (0, 1000], got {self.rate_hz}")
+        if self.ping_attempts < 1:
+            raise ValueError("ping_attempts must be >= 1")
+        if not 0 <= self.profile_acceleration_ms * 2 <= max(self.profile_velocity_ms, 0) or self.profile_velocity_ms < 0:
+            raise ValueError("time-based profile needs 0 <= 2 * profile_acceleration_ms <= profile_velocity_ms")
+
+
+class _MonotonicClock(Clock):
+    def now(self) -> float:
+        return time.monotonic()
+
+
+# --------------------------------------------------------------------------- device
+
+
+@dataclass
+class _TrajRun:
+    goal: Goal
+    traj: JointTrajectory
+    start: float
+    q0: tuple[float, ...]
+
+
+@dataclass
+class _GripRun:
+    goal: Goal
+    target_angle: float
+    pwm: int
+    closing: bool
+    start: float
+    cycles: int = 0
+    still: int = 0
+    sent: bool = False
+
+
+class WX250s:
+    """The arm bus device. Use :attr:`arm` and :attr:`gripper` as capabilities."""
+
+    def __init__(self, config: WX250sConfig, *, clock: Clock | None = None, bus: DxlBus | None = None) -> None:
+        self.config = config
+        self.clock: Clock = clock if clock is not None else _MonotonicClock()
+        self.bus = bus if bus is not None else DxlBus(BusConfig(config.port, config.baudrate, config.latency))
+        self.joints: tuple[JointSpec, ...] = ARM_JOINTS
+        self.position_joints: tuple[JointSpec, ...] = ARM_JOINTS + (PAN_TILT if config.locobot else ())
+        self.all_joints: tuple[JointSpec, ...] = ARM_JOINTS + (GRIPPER,) + (PAN_TILT if config.locobot else ())
+        self.read_ids = tuple(j.id for j in self.all_joints)
+        self.by_id = {j.id: j for j in self.all_joints}
+        self.name_of = {j.id: j.name for j in self.all_joints}
+        for j in self.all_joints:
+            if j.shadow is not None:
+                self.name_of[j.shadow] = f"{j.name}_shadow"
+        self.found: dict[int, PingInfo] = {}
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._state: JointState | None = None
+        self._readings: dict[int, ServoReading] = {}
+        self._goals_pulses: list[int] = []
+        self._traj: _TrajRun | None = None
+        self._grip: _GripRun | None = None
+        self._grip_pwm = 0
+        self._grip_state: GripperState | None = None
+        self._faults: dict[int, tuple[str, ...]] = {}
+        self._requests: list[Callable[[], None]] = []
+        self._missed = 0
+        self._link_error = ""
+        self._connected = False
+        self._io: CycleIO | None = None
+        self._arm = WX250sArm(self)
+        self._gripper = WX250sGripper(self)
+
+    # -- capabilities
+    @property
+    def arm(self) -> WX250sArm:
+        return self._arm
+
+    @property
+    def gripper(self) -> WX250sGripper:
+        return self._gripper
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    @property
+    def faults(self) -> dict[str, tuple[str, ...]]:
+        """Active hardware faults by joint name."""
+        with self._lock:
+            return {self.name_of.get(i, str(i)): f for i, f in self._faults.items()}
+
+    @property
+    def link_error(self) -> str:
+        """Why the I/O thread stopped ("" while running)."""
+        return self._link_error
+
+    # -- bring-up
+    def servo_ids(self) -> list[int]:
+        """Every id on the bus (joints, shadows, gripper, pan/tilt), ascending."""
+        ids = set(self.read_ids)
+        ids.update(j.shadow for j in self.all_joints if j.shadow is not None)
+        return sorted(ids)
+
+    def _model_of(self, dxl_id: int) -> Model:
+        if dxl_id in self.by_id:
+            return self.by_id[dxl_id].model
+        master = next(j for j in self.all_joints if j.shadow == dxl_id)
+        return master.model
+
+    def connect(self) -> None:
+        """Open the port, run the bring-up and start the I/O thread.
+
+        Bounded by the link deadlines (a few hundred ms); call it from setup, not from a
+        tick. Raises a :class:`DynamixelError` naming the port and the servo id on failure
+        (and closes the port again).
+        """
+        if self._connected:
+            return
+        self.bus.open()
+        try:
+            self._bring_up()
+        except BaseException:
+            self.bus.close()
+            raise
+        self._stop.clear()
+        self._link_error = ""
+        self._connected = True
+        self._thread = threading.Thread(target=self._run, name=f"wx250s-{self.bus.port}", daemon=True)
+        self._thread.start()
+
+    def _bring_up(self) -> None:
+        cfg, bus = self.config, self.bus
+        self.found = {}
+        for dxl_id in self.servo_ids():
+            last: DynamixelError | None = None
+            for _ in range(cfg.ping_attempts):
+                try:
+                    self.found[dxl_id] = bus.ping(dxl_id)
+                    break
+                except DxlLinkError as e:
+                    if isinstance(e, LinkLost):
+                        raise
+                    last = e
+            if dxl_id not in self.found:
+                raise NoReply(bus.port, f"servo id {dxl_id} ({self.name_of[dxl_id]}) did not answer ping "
+                                        f"({cfg.ping_attempts} attempts): {last.detail if last else ''}", dxl_id)
+            want = self._model_of(dxl_id)
+            got = self.found[dxl_id].model
+            if got != want.number:
+                name = MODELS[got].name if got in MODELS else "unknown model"
+                raise DynamixelError(f"{bus.port}: servo id {dxl_id} ({self.name_of[dxl_id]}) is {name} ({got}), "
+                                     f"expected {want.name} ({want.number})")
+        ids = self.servo_ids()
+        for dxl_id in ids:
+            bus.write(dxl_id, TORQUE_ENABLE, b"\x00")
+        for dxl_id in ids:
+            if bus.read(dxl_id, HW_ERROR, 1)[0]:
+                raise HardwareFault(bus.port, dxl_id, decode_hardware_error(bus.read(dxl_id, HW_ERROR, 1)[0]),
+                                    self.name_of[dxl_id])
+        for j in self.all_joints:
+            arm_group = j in ARM_JOINTS
+            mode = OperatingMode.PWM if j is GRIPPER else OperatingMode.POSITION
+            drive = (0x01 if j.reversed else 0) | (0x04 if arm_group else 0)
+            targets = [(j.id, drive, 255)]
+            if j.shadow is not None:
+                targets.append((j.shadow, drive | 0x01, j.id))
+            for dxl_id, dmode, secondary in targets:
+                if cfg.write_eeprom:
+                    bus.write(dxl_id, 9, b"\x00")                              # Return Delay Time 0
+                    bus.write(dxl_id, 10, bytes((dmode,)))                     # Drive Mode
+                    bus.write(dxl_id, 12, bytes((secondary,)))                 # Secondary ID
+                    bus.write(dxl_id, 44, codec.int_to_le(131, 4))             # Velocity Limit 30 rpm
+                    bus.write(dxl_id, 48, codec.int_to_le(j.max_pulses, 4))    # Max Position Limit
+                    bus.write(dxl_id, 52, codec.int_to_le(j.min_pulses, 4))    # Min Position Limit
+                    bus.write(dxl_id, 63, bytes((cfg.shutdown_mask,)))         # Shutdown
+                bus.write(dxl_id, 11, bytes((int(mode),)))                    # Operating Mode
+                if j is GRIPPER:
+                    bus.write(dxl_id, GOAL_PWM, codec.int_to_le(0, 2))
+                elif arm_group:
+                    bus.write(dxl_id, 108, codec.int_to_le(cfg.profile_acceleration_ms, 4))
+                    bus.write(dxl_id, 112, codec.int_to_le(cfg.profile_velocity_ms, 4))
+                else:
+                    bus.write(dxl_id, 108, codec.int_to_le(15, 4))
+                    bus.write(dxl_id, 112, codec.int_to_le(131, 4))
+        models = {i: self.by_id[i].model for i in self.read_ids}
+        self._io = CycleIO(bus, [j.id for j in self.position_joints], self.read_ids, models)
+        readings = self._io.read_state()
+        goals = []
+        for j in self.position_joints:
+            p = min(max(readings[j.id].raw_position, j.min_pulses), j.max_pulses)
+            goals.append(p)
+            bus.write(j.id, GOAL_POSITION, codec.int_to_le(p, 4))
+        for dxl_id in ids:
+            bus.write(dxl_id, TORQUE_ENABLE, b"\x01")
+        with self._lock:
+            self._goals_pulses = goals
+            self._grip_pwm = 0
+            self._faults = {}
+            self._update_state(readings)
+        log.info("%s: wx250s%s up: %s", bus.port, " (LoCoBot)" if cfg.locobot else "",
+                 ", ".join(f"{i}:{MODELS[p.model].name}" for i, p in sorted(self.found.items())))
+
+    # -- shutdown
+    def close(self) -> None:
+        """Hold position, stop the I/O thread, close the port. Idempotent; never raises
+        link errors (they are logged)."""
+        t, self._thread = self._thread, None
+        self._stop.set()
+        if t is not None and t is not threading.current_thread():
+            t.join(timeout=2.0)
+        if self._connected and not self._link_error and self.bus.is_open:
+            try:
+                self._hold_present()
+                if self.config.torque_off_on_close:
+                    for dxl_id in self.servo_ids():
+                        self.bus.write(dxl_id, TORQUE_ENABLE, b"\x00")
+                if self._grip_pwm:
+                    self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+            except DynamixelError as e:
+                log.warning("%s: could not hold position on close: %s", self.bus.port, e)
+        self._finish_goals("driver closed", cancelled=True)
+        self._connected = False
+        self.bus.close()
+
+    def __enter__(self) -> WX250s:
+        self.connect()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- commands (any thread; return at once)
+    def _require(self) -> None:
+        if not self._connected:
+            why = f" ({self._link_error})" if self._link_error else ""
+            raise NotConnected(f"{self.bus.port}: wx250s is not connected{why} (call connect() first)")
+
+    def follow(self, trajectory: JointTrajectory) -> Goal:
+        """Validate and start streaming ``trajectory`` (arm joints); never blocks."""
+        names = tuple(j.name for j in self.joints)
+        if not self._connected:
+            return Goal.failed("follow", f"{self.bus.port}: wx250s is not connected (call connect() first)")
+        if set(trajectory.joint_names) != set(names) or len(trajectory.joint_names) != len(names):
+            return Goal.failed("follow", f"trajectory joints {trajectory.joint_names} do not match {names}")
+        order = [trajectory.joint_names.index(n) for n in names]
+        points = [tuple(float(p[k]) for k in order) for p in trajectory.positions]
+        traj = JointTrajectory(names, trajectory.times, tuple(points))
+        with self._lock:
+            if self._faults:
+                return Goal.failed("follow", self._fault_text())
+            state = self._state
+        q0 = state.positions if state is not None else points[0]
+        problem = check_limits(self.joints, q0, traj)
+        if problem:
+            return Goal.failed("follow", problem)
+        goal = Goal("wx250s.follow", on_cancel=self._on_cancel)
+        with self._lock:
+            prev = self._traj
+            self._traj = _TrajRun(goal, traj, self.clock.now(), tuple(q0))
+        if prev is not None:
+            prev.goal.mark_cancelled("preempted by a new trajectory")
+        return goal
+
+    def stop(self) -> None:
+        """Cancel any trajectory and hold the present position."""
+        with self._lock:
+            run = self._traj
+        if run is not None:
+            run.goal.cancel()
+        else:
+            self._request(self._hold_present)
+
+    def _on_cancel(self, goal: Goal) -> None:
+        # the I/O thread notices CANCELLING, holds and marks the goal cancelled
+        if not self._connected or self._thread is None:
+            goal.mark_cancelled("cancelled (driver not running)")
+
+    def gripper_move(self, width: float, force: float) -> Goal:
+        """Drive the gripper toward ``width`` [m] in PWM mode with a PWM set from ``force`` [N]."""
+        cfg = self.config
+        if not self._connected:
+            return Goal.failed("gripper", f"{self.bus.port}: wx250s is not connected (call connect() first)")
+        lo, hi = 2 * FINGER_MIN, 2 * FINGER_MAX
+        if not lo - 1e-9 <= width <= hi + 1e-9:
+            return Goal.failed("gripper", f"width {width:.4f} m outside {lo:.3f}..{hi:.3f} m")
+        with self._lock:
+            if GRIPPER.id in self._faults:
+                return Goal.failed("gripper", self._fault_text())
+            reading = self._readings.get(GRIPPER.id)
+        if reading is None:
+            return Goal.failed("gripper", "no gripper state yet")
+        target = gripper_angle_for_width(min(max(width, lo), hi))
+        frac = min(max(force, 0.0) / cfg.gripper_max_force, 1.0)
+        mag = int(round(cfg.gripper_pwm_min + frac * (cfg.gripper_pwm_max - cfg.gripper_pwm_min)))
+        closing = target < reading.position
+        goal = Goal("wx250s.gripper", on_cancel=self._on_cancel)
+        with self._lock:
+            prev = self._grip
+            self._grip = _GripRun(goal, target, -mag if closing else mag, closing, self.clock.now())
+        if prev is not None:
+            prev.goal.mark_cancelled("preempted by a new gripper command")
+        return goal
+
+    def reboot(self, joint: str) -> Goal:
+        """Reboot one joint's servo (its shadow follows), then restore goal and torque."""
+        ids = [i for i, n in self.name_of.items() if n == joint]
+        if not ids:
+            return Goal.failed("reboot", f"unknown joint {joint!r} (known: {', '.join(sorted(set(self.name_of.values())))})")
+        return self._reboot_goal(ids)
+
+    def smart_reboot(self) -> Goal:
+        """Read Hardware Error Status of every servo and reboot only those reporting one."""
+        return self._reboot_goal(None)
+
+    def _reboot_goal(self, ids: list[int] | None) -> Goal:
+        goal = Goal("wx250s.reboot")
+        if not self._connected:
+            goal.fail(f"{self.bus.port}: wx250s is not connected (call connect() first)")
+            return goal
+
+        def work() -> None:
+            try:
+                targets = ids
+                if targets is None:
+                    targets = [i for i in self.servo_ids() if self.bus.read(i, HW_ERROR, 1)[0]]
+                for i in targets:
+                    self.bus.reboot(i)
+                # wait for the restart within the link deadline; ping answers once it is back
+                for i in targets:
+                    self.bus.ping(i)
+                readings = self._io.read_state() if self._io else {}
+                for i in targets:
+                    j = self.by_id.get(i)
+                    if j is not None and j in self.position_joints and i in readings:
+                        p = min(max(readings[i].raw_position, j.min_pulses), j.max_pulses)
+                        self.bus.write(i, GOAL_POSITION, codec.int_to_le(p, 4))
+                        with self._lock:
+                            self._goals_pulses[self.position_joints.index(j)] = p
+                    self.bus.write(i, TORQUE_ENABLE, b"\x01")
+                with self._lock:
+                    for i in targets:
+                        self._faults.pop(i, None)
+                        master = next((j.id for j in self.all_joints if j.shadow == i), None)
+                        if master is not None:
+                            self._faults.pop(master, None)
+                goal.succeed(tuple(self.name_of.get(i, str(i)) for i in targets))
+            except DynamixelError as e:
+                goal.fail(f"reboot failed: {e}")
+
+        self._request(work)
+        return goal
+
+    def _request(self, fn: Callable[[], None]) -> None:
+        with self._lock:
+            self._requests.append(fn)
+
+    # -- state
+    def joint_state(self) -> JointState:
+        with self._lock:
+            st = self._state
+        if st is None:
+            raise NotConnected(f"{self.bus.port}: no joint state yet (call connect() first)")
+        return st
+
+    def gripper_state(self) -> GripperState:
+        with self._lock:
+            r = self._readings.get(GRIPPER.id)
+            run = self._grip
+            last = self._grip_state
+            fault = ", ".join(self._faults.get(GRIPPER.id, ()))
+        if r is None:
+            raise NotConnected(f"{self.bus.port}: no gripper state yet (call connect() first)")
+        grasp = GraspState.MOVING if run is not None else (last.grasp if last else GraspState.AT_POSITION)
+        return GripperState(gripper_width(max(-math.pi / 2, min(math.pi / 2, r.position))), grasp, self.clock.now(),
+                            fault)
+
+    def _update_state(self, readings: dict[int, ServoReading]) -> None:
+        self._readings.update(readings)
+        js = [self._readings[j.id] for j in self.joints if j.id in self._readings]
+        if len(js) == len(self.joints):
+            self._state = JointState(
+                tuple(j.name for j in self.joints),
+                tuple(r.position for r in js),
+                tuple(r.velocity for r in js),
+                tuple(r.effort for r in js),
+                self.clock.now(),
+            )
+
+    def _fault_text(self) -> str:
+        parts = [f"servo id {i} ({self.name_of.get(i, i)}): {', '.join(f)}" for i, f in sorted(self._faults.items())]
+        return f"hardware fault on {self.bus.port}: " + "; ".join(parts) + " (call reboot(joint) or smart_reboot())"
+
+    # -- I/O thread
+    def _run(self) -> None:
+        period = 1.0 / self.config.rate_hz
+        next_t = time.monotonic()
+        try:
+            while not self._stop.is_set():
+                self._cycle()
+                next_t += period
+                delay = next_t - time.monotonic()
+                if delay < -period:
+                    next_t = time.monotonic()
+                    delay = 0.0
+                if delay > 0:
+                    self._stop.wait(delay)
+        except LinkLost as e:
+            self._link_error = f"link lost: {e}"
+            log.error("%s", self._link_error)
+            self._finish_goals(self._link_error)
+            self._connected = False
+        except Exception as e:  # noqa: BLE001 - must not die silently: fail goals with the cause
+            self._link_error = f"driver error: {e}"
+            log.exception("%s: I/O thread failed", self.bus.port)
+            self._finish_goals(self._link_error)
+            self._connected = False
+
+    def _finish_goals(self, reason: str, *, cancelled: bool = False) -> None:
+        with self._lock:
+            runs = [r.goal for r in (self._traj, self._grip) if r is not None]
+            self._traj = self._grip = None
+            reqs, self._requests = self._requests, []
+        for g in runs:
+            if cancelled:
+                g.mark_cancelled(reason)
+            else:
+                g.fail(reason)
+        if reqs:
+            log.debug("%d pending requests dropped: %s", len(reqs), reason)
+
+    def _hold_present(self) -> None:
+        """Goal = present position for every position joint (last reading)."""
+        assert self._io is not None
+        with self._lock:
+            goals = []
+            for k, j in enumerate(self.position_joints):
+                r = self._readings.get(j.id)
+                p = r.raw_position if r is not None else self._goals_pulses[k]
+                goals.append(min(max(p, j.min_pulses), j.max_pulses))
+            self._goals_pulses = goals
+        self._io.write_goals(goals)
+
+    def _cycle(self) -> None:
+        assert self._io is not None
+        with self._lock:
+            reqs, self._requests = self._requests, []
+        for fn in reqs:
+            fn()
+        now = self.clock.now()
+        self._advance_trajectory(now)
+        with self._lock:
+            goals = list(self._goals_pulses)
+        self._io.write_goals(goals)
+        self._advance_gripper_pwm()
+        try:
+            readings = self._io.read_state()
+            self._missed = 0
+        except LinkLost:
+            raise
+        except DxlLinkError as e:
+            partial = getattr(e, "received", {})
+            readings = {i: self._io.decode(i, st) for i, st in partial.items()}
+            self._missed += 1
+            if self._missed >= self.config.max_missed_cycles:
+                who = f" ({self.name_of.get(e.id, '')})" if e.id is not None else ""
+                self._fail_running(f"{e}{who} for {self._missed} cycles")
+        with self._lock:
+            self._update_state(readings)
+        alerts = [i for i, r in readings.items() if r.error & codec.ALERT_BIT]
+        if alerts:
+            self._on_alerts(alerts)
+        self._check_trajectory_done(self.clock.now())
+        self._check_gripper(self.clock.now())
+
+    def _fail_running(self, reason: str) -> None:
+        with self._lock:
+            runs = [r.goal for r in (self._traj, self._grip) if r is not None]
+            self._traj = self._grip = None
+        for g in runs:
+            g.fail(reason)
+        if runs:
+            self._hold_present()
+
+    def _on_alerts(self, ids: list[int]) -> None:
+        new = {}
+        for i in ids:
+            if i in self._faults:
+                continue
+            try:
+                names = self.bus.hardware_error(i)
+            except DxlLinkError as e:
+                names = (f"alert (Hardware Error Status unreadable: {e.detail})",)
+            new[i] = names or ("alert",)
+        if not new:
+            return
+        with self._lock:
+            self._faults.update(new)
+            text = self._fault_text()
+        log.error("%s", text)
+        self._fail_running(text)
+        self._hold_present()
+
+    def _advance_trajectory(self, now: float) -> None:
+        with self._lock:
+            run = self._traj
+        if run is None:
+            return
+        if run.goal.state is GoalState.CANCELLING:
+            with self._lock:
+                self._traj = None
+            self._hold_present()
+            run.goal.mark_cancelled("cancelled: holding position")
+            return
+        t = now - run.start
+        traj = run.traj
+        if t < traj.times[0]:
+            a = t / traj.times[0]
+            q = [x0 + a * (x1 - x0) for x0, x1 in zip(run.q0, traj.positions[0])]
+        else:
+            q = list(traj.sample(t))
+        pulses = [min(max(rad_to_pulses(x), j.min_pulses), j.max_pulses) for x, j in zip(q, self.joints)]
+        with self._lock:
+            self._goals_pulses[: len(pulses)] = pulses
+
+    def _check_trajectory_done(self, now: float) -> None:
+        with self._lock:
+            run = self._traj
+            st = self._state
+        if run is None or st is None or run.goal.state is not GoalState.ACTIVE:
+            return
+        t = now - run.start
+        if t < run.traj.duration:
+            return
+        errs = [abs(a - b) for a, b in zip(st.positions, run.traj.positions[-1])]
+        worst = int(np.argmax(errs))
+        if errs[worst] <= self.config.tolerance:
+            with self._lock:
+                self._traj = None
+            run.goal.succeed(st)
+        elif t > run.traj.duration + self.config.settle_timeout:
+            with self._lock:
+                self._traj = None
+            self._hold_present()
+            run.goal.fail(f"did not reach the last waypoint within {self.config.settle_timeout:.2f} s: "
+                          f"{self.joints[worst].name} off by {errs[worst]:.3f} rad")
+
+    def _advance_gripper_pwm(self) -> None:
+        with self._lock:
+            run = self._grip
+        want = self._grip_pwm
+        if run is not None and run.goal.state is GoalState.CANCELLING:
+            with self._lock:
+                self._grip = None
+            want = 0
+            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+            self._grip_pwm = 0
+            run.goal.mark_cancelled("cancelled: gripper stopped")
+            return
+        if run is not None and not run.sent:
+            want = run.pwm
+            run.sent = True
+        if want != self._grip_pwm:
+            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(want, 2))])
+            self._grip_pwm = want
+
+    def _check_gripper(self, now: float) -> None:
+        cfg = self.config
+        with self._lock:
+            run = self._grip
+            r = self._readings.get(GRIPPER.id)
+        if run is None or r is None or not run.sent or run.goal.state is not GoalState.ACTIVE:
+            return
+        run.cycles += 1
+        reached = (r.position <= run.target_angle) if run.closing else (r.position >= run.target_angle)
+        width = gripper_width(max(-math.pi / 2, min(math.pi / 2, r.position)))
+        near = abs(width - gripper_width(run.target_angle)) <= cfg.gripper_width_tolerance
+        run.still = run.still + 1 if abs(r.velocity) < 0.03 else 0
+        result: GraspState | None = None
+        if reached or (near and run.still >= 2):
+            result = GraspState.AT_POSITION
+        elif run.cycles >= 3 and run.still >= 3:
+            if abs(r.effort) >= cfg.gripper_load_threshold:
+                result = GraspState.CONTACT_CLOSING if run.closing else GraspState.CONTACT_OPENING
+            else:
+                result = GraspState.AT_POSITION
+        if result is None:
+            if now - run.start > cfg.gripper_timeout:
+                with self._lock:
+                    self._grip = None
+                self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+                self._grip_pwm = 0
+                run.goal.fail(f"gripper did not stop within {cfg.gripper_timeout:.1f} s (width {width:.4f} m)")
+            return
+        if result is GraspState.AT_POSITION:
+            # free fingers: stop pushing. On an object: keep squeezing at the commanded PWM.
+            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+            self._grip_pwm = 0
+        state = GripperState(width, result, now)
+        with self._lock:
+            self._grip = None
+            self._grip_state = state
+        run.goal.succeed(state)
+
+
+def check_limits(joints: Sequence[JointSpec], q0: Sequence[float], traj: JointTrajectory) -> str:
+    """"" when ``traj`` (joints in ``joints`` order, starting from ``q0``) respects every
+    joint's range and velocity limit, else a one-line reason naming the joint."""
+    prev_t, prev_q = 0.0, tuple(q0)
+    for i, (t, q) in enumerate(zip(traj.times, traj.positions)):
+        for j, x in zip(joints, q):
+            if not math.isfinite(x):
+                return f"waypoint {i}: {j.name} is not a finite number"
+            if not j.lower - 1e-9 <= x <= j.upper + 1e-9:
+                return (f"waypoint {i}: {j.name} = {x:.4f} rad outside its limits "
+                        f"[{j.lower:.4f}, {j.upper:.4f}] rad; nothing was sent")
+        dt = t - prev_t
+        for j, a, b in zip(joints, prev_q, q):
+            v = abs(b - a) / dt
+            if v > j.velocity * (1 + 1e-6):
+                return (f"waypoint {i}: {j.name} would move at {v:.3f} rad/s, above its limit "
+                        f"{j.velocity:.3f} rad/s; nothing was sent")
+        prev_t, prev_q = t, q
+    return ""
+
+
+# --------------------------------------------------------------------------- adapters
+
+
+class WX250sArm(Arm):
+    """:class:`~mmexec.drivers.interfaces.Arm` over a :class:`WX250s` device."""
+
+    def __init__(self, device: WX250s) -> None:
+        self._dev = device
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self._dev.joints)
+
+    @property
+    def limits(self) -> tuple[JointLimit, ...]:
+        return tuple(j.limit() for j in self._dev.joints)
+
+    @property
+    def mount(self) -> np.ndarray:
+        """``T_base_armbase``: LoCoBot arm_base_link in base_link, identity for a bare arm."""
+        T = np.eye(4)
+        if self._dev.config.locobot:
+            T[:3, 3] = LOCOBOT_MOUNT
+        return T
+
+    def state(self) -> JointState:
+        return self._dev.joint_state()
+
+    def follow(self, trajectory: JointTrajectory) -> Goal:
+        return self._dev.follow(trajectory)
+
+    def stop(self) -> None:
+        self._dev.stop()
+
+
+class WX250sGripper(Gripper):
+    """:class:`~mmexec.drivers.interfaces.Gripper` over the wx250s gripper servo (PWM mode).
+
+    ``speed`` cannot be set in PWM mode (the fingers move at the speed the PWM gives);
+    ``force`` [N] maps linearly onto PWM between ``gripper_pwm_min`` and ``gripper_pwm_max``
+    (at ``gripper_max_force``), which is also the squeeze kept on a grasped object.
+    """
+
+    min_width = 2 * FINGER_MIN
+    max_width = 2 * FINGER_MAX
+
+    def __init__(self, device: WX250s) -> None:
+        self._dev = device
+        self.max_force = device.config.gripper_max_force
+
+    def state(self) -> GripperState:
+        return self._dev.gripper_state()
+
+    def move(self, width: float, *, speed: float = 0.1, force: float = 50.0) -> Goal:
+        if speed <= 0:
+            return Goal.failed("gripper", f"speed must be > 0 m/s, got {speed}")
+        return self._dev.gripper_move(width, force)
