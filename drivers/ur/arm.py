@@ -1,0 +1,777 @@
+"""UR e-series arm as an :class:`~mmexec.drivers.interfaces.Arm`, through ur_rtde.
+
+Threading: every ur_rtde call (constructors, moves, reads, stops, disconnect) runs in
+one dedicated worker thread, ``ur-rtde-<host>``; the tick thread only posts commands and
+reads a cache, so nothing here blocks a tick. Each call has a deadline (``connect_timeout``
+for the constructors, ``command_timeout`` for everything else): a call that overruns it
+fails the running goal with ``connection lost: ur_rtde <call> did not return within ...``
+as soon as the goal is next polled, and the link is torn down when the call returns.
+
+Motion: :meth:`URArm.follow` streams ``servoJ`` at ``frequency`` [Hz] along the
+trajectory, linearly interpolated in clock time from the current position (one servo
+target per worker cycle; no moveJ path blending, so timing follows the trajectory
+exactly); :meth:`URArm.move_to` sends one asynchronous ``moveJ``. Cancelling decelerates
+(``servoStop`` / ``stopJ`` at ``stop_deceleration``) and the goal becomes CANCELLED once
+every joint speed is below ``rest_speed``.
+
+Faults (checked every worker cycle, each fails the running goal with this reason prefix):
+``connection lost`` (``isConnected()`` False, a call raised, or the controller timestamp
+did not advance for ``stale_timeout`` clock seconds), ``protective stop``, ``emergency
+stop``, ``safeguard stop``, ``safety fault``, ``program stopped``, ``robot not running``.
+After a connection loss call :meth:`URArm.reconnect`; safety faults clear by themselves
+once the controller reports normal again (after the operator unlocks it on the pendant).
+
+Frames: joint angles are the same for ROS and the controller. :meth:`URArm.tcp_pose`
+returns ``T_baselink_tool0`` in the ROS ``base_link`` of the arm (REP-103), converted from
+the controller's ``base`` frame (``base`` = ``base_link`` rotated pi about z).
+:attr:`URArm.mount` is the arm's ``base_link`` in the robot's ``base_link``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import socket
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mmexec.drivers.interfaces import (
+    Arm,
+    CapabilityError,
+    Clock,
+    Goal,
+    GoalState,
+    JointLimit,
+    JointState,
+    JointTrajectory,
+)
+from mmexec.drivers.ur import model as urmodel
+
+__all__ = [
+    "MonotonicClock",
+    "RECEIVE_VARIABLES",
+    "RTDE_PORT",
+    "URArm",
+    "URArmConfig",
+    "URConnectionError",
+    "URStatus",
+    "probe_port",
+]
+
+log = logging.getLogger(__name__)
+
+RTDE_PORT = 30004
+
+#: The RTDE output recipe the adapter asks for (a small recipe keeps the 500 Hz link cheap).
+RECEIVE_VARIABLES: tuple[str, ...] = (
+    "timestamp",
+    "actual_q",
+    "actual_qd",
+    "actual_current",
+    "actual_TCP_pose",
+    "robot_mode",
+    "safety_mode",
+    "safety_status_bits",
+    "runtime_state",
+    "robot_status_bits",
+)
+
+ROBOT_MODES = {
+    -1: "no controller", 0: "disconnected", 1: "confirm safety", 2: "booting", 3: "power off",
+    4: "power on", 5: "idle", 6: "backdrive", 7: "running", 8: "updating firmware",
+}
+SAFETY_MODES = {
+    1: "normal", 2: "reduced", 3: "protective stop", 4: "recovery", 5: "safeguard stop",
+    6: "system emergency stop", 7: "robot emergency stop", 8: "violation", 9: "fault",
+    10: "validate joint id", 11: "undefined", 12: "automatic-mode safeguard stop",
+    13: "three-position-enabling stop",
+}
+RUNTIME_STATES = {0: "stopping", 1: "stopped", 2: "playing", 3: "pausing", 4: "paused", 5: "resuming"}
+
+
+class URConnectionError(CapabilityError):
+    """Connecting to the controller failed or timed out (one-line message naming host:port)."""
+
+
+class MonotonicClock(Clock):
+    """The wall clock for the real robot: ``time.monotonic()`` seconds."""
+
+    def now(self) -> float:
+        return time.monotonic()
+
+
+@dataclass(frozen=True)
+class URArmConfig:
+    """Parameters of :class:`URArm`. Times in seconds, angles rad, rates Hz.
+
+    ``stale_timeout`` is measured on the injected clock; ``connect_timeout`` and
+    ``command_timeout`` are link deadlines on ``time.monotonic()``.
+    """
+
+    host: str
+    model: str = "ur5e"
+    frequency: float = 500.0
+    connect_timeout: float = 5.0
+    command_timeout: float = 0.5
+    stale_timeout: float = 0.1
+    move_acceleration: float = 1.4
+    acceleration_limit: float = math.inf
+    stop_deceleration: float = 2.0
+    stop_timeout: float = 3.0
+    settle_timeout: float = 1.0
+    goal_tolerance: float = 0.01
+    rest_speed: float = 0.01
+    servo_lookahead: float = 0.1
+    servo_gain: float = 300.0
+    mount: tuple[float, ...] = field(default=tuple(np.eye(4).ravel()))
+
+    def __post_init__(self) -> None:
+        if self.model not in urmodel.MODELS:
+            raise ValueError(f"unknown UR model {self.model!r} (known: {', '.join(urmodel.MODELS)})")
+        for name in ("frequency", "connect_timeout", "command_timeout", "stale_timeout", "stop_deceleration",
+                     "stop_timeout", "settle_timeout", "goal_tolerance", "rest_speed", "move_acceleration"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"URArmConfig.{name} must be > 0, got {getattr(self, name)}")
+        if len(self.mount) != 16:
+            raise ValueError("URArmConfig.mount must hold a row-major 4x4 transform (16 values)")
+
+
+@dataclass(frozen=True)
+class URStatus:
+    """Controller status from the last read (``stamp`` clock s); ``fault`` is "" when fine."""
+
+    connected: bool
+    robot_mode: int
+    safety_mode: int
+    runtime_state: int
+    fault: str
+    stamp: float
+
+
+def probe_port(host: str, port: int, timeout: float) -> None:
+    """Check that ``host:port`` accepts a TCP connection within ``timeout`` s.
+
+    Used before handing a host to ur_rtde, whose constructors hold the GIL while the OS
+    connect timeout runs. Raises :class:`URConnectionError` with a one-line reason.
+    """
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            return
+    except ConnectionRefusedError:
+        raise URConnectionError(f"{host}:{port}: connection refused (is the controller on and RTDE enabled?)") from None
+    except TimeoutError:
+        raise URConnectionError(f"{host}:{port}: no answer within {timeout:.1f} s") from None
+    except OSError as e:
+        raise URConnectionError(f"{host}:{port}: {e.strerror or e}") from None
+
+
+ControlFactory = Callable[[str, float], Any]
+ReceiveFactory = Callable[[str, float], Any]
+
+
+@dataclass
+class _Motion:
+    goal: Goal
+    kind: str                      # "servo" | "move"
+    target: np.ndarray             # final joint vector [rad]
+    times: tuple[float, ...] = ()  # servo: waypoint times from start, incl. 0
+    points: np.ndarray | None = None
+    speed: float = 0.0             # move: leading-joint speed [rad/s]
+    expected: float = 0.0          # s of clock time the motion should take
+    t0: float = 0.0
+    phase: str = "start"           # start | run | settle | stopping
+    t_phase: float = 0.0
+    last_cmd: np.ndarray | None = None
+
+
+class _Stalled(Exception):
+    """A ur_rtde call overran its deadline (raised in the worker once it returns).
+
+    ``result`` is what the late call returned (e.g. an interface to disconnect)."""
+
+    def __init__(self, reason: str, result: Any = None) -> None:
+        super().__init__(reason)
+        self.result = result
+
+
+class URArm(Arm):
+    """UR e-series arm adapter. Construction does no I/O: call :meth:`open` (blocking,
+    bounded, for setup) or :meth:`connect` (returns a Goal). Always :meth:`close`."""
+
+    def __init__(
+        self,
+        config: URArmConfig,
+        *,
+        clock: Clock | None = None,
+        control_factory: ControlFactory | None = None,
+        receive_factory: ReceiveFactory | None = None,
+    ) -> None:
+        self.config = config
+        self.clock: Clock = clock if clock is not None else MonotonicClock()
+        self._control_factory = control_factory or self._default_control
+        self._receive_factory = receive_factory or self._default_receive
+        self._limits = urmodel.joint_limits(config.model, config.acceleration_limit)
+        self._mount = np.array(config.mount, dtype=float).reshape(4, 4)
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._commands: list[tuple[Any, ...]] = []
+        self._thread: threading.Thread | None = None
+        self._shutdown = False
+        # tick-side view (under _lock)
+        self._state = JointState(urmodel.JOINT_NAMES, (0.0,) * 6, (0.0,) * 6, (0.0,) * 6, self.clock.now())
+        self._have_state = False
+        self._tcp_pose: list[float] = [0.0] * 6
+        self._status = URStatus(False, 0, 0, 0, "not connected", self.clock.now())
+        self._busy: Goal | None = None
+        self._watched: list[Goal] = []
+        self._inflight: tuple[str, float, float] | None = None  # name, deadline, timeout
+        self._stalled = ""
+        # worker-only
+        self._ctl: Any = None
+        self._rcv: Any = None
+        self._link_lost = "not connected"
+        self._motion: _Motion | None = None
+        self._last_ts: float | None = None
+        self._last_fresh = 0.0
+
+    # ------------------------------------------------------------------ default factories
+    def _default_receive(self, host: str, frequency: float) -> Any:
+        import rtde_receive
+
+        probe_port(host, RTDE_PORT, self.config.connect_timeout)
+        return rtde_receive.RTDEReceiveInterface(host, frequency, list(RECEIVE_VARIABLES))
+
+    def _default_control(self, host: str, frequency: float) -> Any:
+        import rtde_control
+
+        probe_port(host, RTDE_PORT, self.config.connect_timeout)
+        return rtde_control.RTDEControlInterface(host, frequency)
+
+    # ------------------------------------------------------------------ Arm API
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return urmodel.JOINT_NAMES
+
+    @property
+    def limits(self) -> tuple[JointLimit, ...]:
+        return self._limits
+
+    @property
+    def mount(self) -> np.ndarray:
+        """``T_base_armbase``: the arm's ROS ``base_link`` in the robot's ``base_link``."""
+        return self._mount.copy()
+
+    def state(self) -> JointState:
+        """Latest joint state (positions rad, velocities rad/s, currents A). Never blocks."""
+        self._check_stall()
+        with self._lock:
+            return self._state
+
+    def status(self) -> URStatus:
+        """Latest controller status. Never blocks."""
+        self._check_stall()
+        with self._lock:
+            return self._status
+
+    def tcp_pose(self) -> np.ndarray:
+        """``T_baselink_tool0`` (4x4, ROS ``base_link`` of the arm) from the last read."""
+        with self._lock:
+            pose = list(self._tcp_pose)
+        return urmodel.T_BASELINK_BASE @ urmodel.pose_to_matrix(pose)
+
+    @property
+    def connected(self) -> bool:
+        with self._lock:
+            return self._status.connected
+
+    def connect(self) -> Goal:
+        """Start connecting (constructs both interfaces in the worker); returns at once."""
+        goal = self._new_goal("connect")
+        self._post("connect", goal)
+        return goal
+
+    def reconnect(self) -> Goal:
+        """Drop the current interfaces (if any) and connect again; returns at once."""
+        goal = self._new_goal("reconnect")
+        self._post("connect", goal)
+        return goal
+
+    def open(self, timeout: float | None = None) -> None:
+        """Connect and wait (bounded) for the result: for setup, not for ticks.
+
+        Raises :class:`URConnectionError` with a one-line reason on failure or timeout.
+        """
+        limit = timeout if timeout is not None else self.config.connect_timeout
+        goal = self.connect()
+        deadline = time.monotonic() + limit
+        done = threading.Event()
+        while not goal.done():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                goal.fail(f"no answer within {limit:.1f} s")
+                self._unwatch(goal)
+                break
+            done.wait(min(left, 0.01))
+        if goal.state is not GoalState.SUCCEEDED:
+            raise URConnectionError(f"UR {self.config.host}:{RTDE_PORT}: {goal.reason}")
+
+    def follow(self, trajectory: JointTrajectory) -> Goal:
+        """Stream ``trajectory`` with servoJ; limits are checked before anything is sent."""
+        refusal = self._refusal()
+        if refusal:
+            return Goal.failed("follow", refusal)
+        if tuple(trajectory.joint_names) != self.joint_names:
+            return Goal.failed("follow", f"trajectory joints {trajectory.joint_names} differ from {self.joint_names}")
+        start = np.array(self.state().positions)
+        times = (0.0, *trajectory.times)
+        points = np.vstack([start, np.array(trajectory.positions, dtype=float)])
+        problem = self._check_limits(times, points)
+        if problem:
+            return Goal.failed("follow", problem)
+        goal = self._new_goal("follow", busy=True)
+        if goal.done():
+            return goal
+        self._post("motion", _Motion(goal, "servo", points[-1], times, points, expected=trajectory.duration))
+        return goal
+
+    def move_to(self, q: Sequence[float], *, speed_scale: float = 0.5) -> Goal:
+        """Asynchronous moveJ to ``q`` [rad] at ``speed_scale`` of the slowest joint limit."""
+        if not 0.0 < speed_scale <= 1.0:
+            return Goal.failed("move_to", f"speed_scale {speed_scale} outside (0, 1]")
+        if len(q) != 6:
+            return Goal.failed("move_to", f"expected 6 joint values, got {len(q)}")
+        refusal = self._refusal()
+        if refusal:
+            return Goal.failed("move_to", refusal)
+        target = np.array(q, dtype=float)
+        start = np.array(self.state().positions)
+        for lim, x in zip(self._limits, target):
+            if not lim.contains(float(x)):
+                return Goal.failed("move_to", f"{lim.name}: {x:.4f} rad outside [{lim.lower:.4f}, {lim.upper:.4f}]")
+        speed = speed_scale * min(lim.velocity for lim in self._limits)
+        acc = min(self.config.move_acceleration, self.config.acceleration_limit)
+        dist = float(np.max(np.abs(target - start)))
+        expected = dist / speed + speed / acc
+        goal = self._new_goal("move_to", busy=True)
+        if goal.done():
+            return goal
+        self._post("motion", _Motion(goal, "move", target, speed=speed, expected=expected))
+        return goal
+
+    def stop(self) -> None:
+        """Cancel the running goal (decelerate, hold) and command a stop. Never blocks."""
+        with self._lock:
+            busy = self._busy
+        if busy is not None:
+            busy.cancel()
+        self._post("stop")
+
+    def close(self, timeout: float | None = None) -> None:
+        """Stop the arm (servoStop, stopJ), disconnect both interfaces, join the worker.
+
+        Blocks at most ``timeout`` s (default ``2 * command_timeout + 1``)."""
+        self._post("close")
+        t = self._thread
+        if t is not None:
+            t.join(timeout if timeout is not None else 2 * self.config.command_timeout + 1.0)
+            if t.is_alive():
+                log.warning("UR %s: worker still inside a ur_rtde call after close(); left as daemon", self.config.host)
+        self._thread = None
+
+    # ------------------------------------------------------------------ tick-side helpers
+    def _refusal(self) -> str:
+        self._check_stall()
+        with self._lock:
+            st = self._status
+            busy = self._busy
+        if not st.connected:
+            return f"arm not connected ({st.fault}): call connect() or reconnect() first"
+        if st.fault:
+            return f"{st.fault}: clear it on the teach pendant (or reconnect()) first"
+        if busy is not None:
+            return f"arm busy with {busy.name}: cancel it first"
+        return ""
+
+    def _check_limits(self, times: Sequence[float], points: np.ndarray) -> str:
+        for k, row in enumerate(points[1:], start=1):
+            for lim, x in zip(self._limits, row):
+                if not lim.contains(float(x)):
+                    return f"{lim.name}: waypoint {k} at {x:.4f} rad outside [{lim.lower:.4f}, {lim.upper:.4f}]"
+        vel = np.diff(points, axis=0) / np.diff(np.asarray(times))[:, None]
+        for k, seg in enumerate(vel):
+            for lim, v in zip(self._limits, seg):
+                if abs(v) > lim.velocity * (1 + 1e-6):
+                    return f"{lim.name}: segment {k} needs {abs(v):.3f} rad/s, limit {lim.velocity:.3f} rad/s"
+        if math.isfinite(self.config.acceleration_limit) and len(vel) > 1:
+            mid = (np.asarray(times[2:]) - np.asarray(times[:-2])) / 2.0
+            acc = np.diff(vel, axis=0) / mid[:, None]
+            for k, row in enumerate(acc):
+                for lim, a in zip(self._limits, row):
+                    if abs(a) > lim.acceleration * (1 + 1e-6):
+                        return f"{lim.name}: waypoint {k + 1} needs {abs(a):.3f} rad/s^2, limit {lim.acceleration:.3f}"
+        return ""
+
+    def _new_goal(self, name: str, busy: bool = False) -> Goal:
+        goal = Goal(name, on_cancel=self._on_cancel, on_poll=lambda g: self._check_stall())
+        with self._lock:
+            if busy:
+                if self._busy is not None:
+                    goal.fail(f"arm busy with {self._busy.name}: cancel it first")
+                    return goal
+                self._busy = goal
+            self._watched.append(goal)
+        return goal
+
+    def _unwatch(self, goal: Goal) -> None:
+        with self._lock:
+            if goal in self._watched:
+                self._watched.remove(goal)
+            if self._busy is goal:
+                self._busy = None
+
+    def _on_cancel(self, goal: Goal) -> None:
+        self._post("cancel", goal)
+
+    def _check_stall(self) -> None:
+        """Fail watched goals if the worker's current ur_rtde call overran its deadline."""
+        with self._lock:
+            inflight = self._inflight
+            if inflight is None or time.monotonic() <= inflight[1] or self._stalled:
+                return
+            name, _, timeout = inflight
+            self._stalled = f"connection lost: ur_rtde {name} did not return within {timeout:.2f} s"
+            reason = self._stalled
+            goals, self._watched, self._busy = self._watched, [], None
+            self._status = URStatus(False, self._status.robot_mode, self._status.safety_mode,
+                                    self._status.runtime_state, reason, self.clock.now())
+        log.error("UR %s: %s", self.config.host, reason)
+        for g in goals:
+            g.fail(reason)
+
+    def _post(self, *cmd: Any) -> None:
+        with self._lock:
+            if self._shutdown:
+                if cmd[0] in ("connect", "motion"):
+                    goal = cmd[1].goal if cmd[0] == "motion" else cmd[1]
+                    goal.fail("arm driver closed")
+                return
+            self._commands.append(cmd)
+            if cmd[0] == "close":
+                self._shutdown = True
+            if self._thread is None and cmd[0] != "close":
+                self._thread = threading.Thread(target=self._run, name=f"ur-rtde-{self.config.host}", daemon=True)
+                self._thread.start()
+        self._wake.set()
+
+    # ------------------------------------------------------------------ worker
+    def _call(self, name: str, fn: Callable[..., Any], *args: Any, timeout: float | None = None) -> Any:
+        """Run one ur_rtde call with a deadline the tick side watches (worker thread only)."""
+        t = timeout if timeout is not None else self.config.command_timeout
+        with self._lock:
+            self._inflight = (name, time.monotonic() + t, t)
+        try:
+            result = fn(*args)
+        finally:
+            with self._lock:
+                self._inflight = None
+                stalled = self._stalled
+        if stalled:
+            raise _Stalled(stalled, result)
+        return result
+
+    def _run(self) -> None:
+        period = 1.0 / self.config.frequency
+        while True:
+            t_cycle = time.monotonic()
+            with self._lock:
+                cmds, self._commands = self._commands, []
+                self._wake.clear()
+            closing = False
+            for cmd in cmds:
+                if cmd[0] == "close":
+                    closing = True
+                    continue
+                self._guard(self._handle, cmd)
+            if closing:
+                self._teardown("arm driver closed")
+                return
+            if self._rcv is not None:
+                self._guard(self._cycle)
+            wait = period - (time.monotonic() - t_cycle) if self._rcv is not None else 0.1
+            if wait > 0:
+                self._wake.wait(wait)
+
+    def _guard(self, fn: Callable[..., None], *args: Any) -> None:
+        """Run a worker step; link errors become 'connection lost' for the running goal."""
+        try:
+            fn(*args)
+        except _Stalled as e:
+            self._lose_link(str(e))
+        except RuntimeError as e:
+            self._lose_link(f"connection lost: {_one_line(e)}")
+
+    def _handle(self, cmd: tuple[Any, ...]) -> None:
+        kind = cmd[0]
+        if kind == "connect":
+            self._do_connect(cmd[1])
+        elif kind == "motion":
+            self._start_motion(cmd[1])
+        elif kind == "cancel":
+            m = self._motion
+            if m is not None and m.goal is cmd[1] and m.phase != "stopping":
+                self._begin_stop(m)
+        elif kind == "stop":
+            if self._motion is None and self._ctl is not None and not self._link_lost:
+                self._call("stopJ", self._ctl.stopJ, self.config.stop_deceleration, True)
+
+    def _do_connect(self, goal: Goal) -> None:
+        self._disconnect_all()
+        with self._lock:
+            self._stalled = ""
+        host, freq = self.config.host, self.config.frequency
+        rcv = ctl = None
+        try:
+            rcv = self._call("RTDEReceiveInterface()", self._receive_factory, host, freq, timeout=self.config.connect_timeout)
+            ctl = self._call("RTDEControlInterface()", self._control_factory, host, freq, timeout=self.config.connect_timeout)
+        except (RuntimeError, URConnectionError, _Stalled) as e:
+            with self._lock:
+                self._stalled = ""
+            late_result = e.result if isinstance(e, _Stalled) else None
+            for late in (ctl, rcv, late_result):
+                self._safe_disconnect(late)
+            reason = _one_line(e)
+            with self._lock:
+                self._stalled = ""
+            goal.fail(reason if not isinstance(e, RuntimeError) else f"cannot connect: {reason}")
+            self._unwatch(goal)
+            return
+        if goal.done():  # gave up waiting (open() timed out): do not keep a late link
+            self._safe_disconnect(ctl)
+            self._safe_disconnect(rcv)
+            return
+        self._rcv, self._ctl, self._link_lost = rcv, ctl, ""
+        self._last_ts = None
+        self._last_fresh = self.clock.now()
+        self._read()
+        log.info("UR %s: connected", host)
+        goal.succeed()
+        self._unwatch(goal)
+
+    def _read(self) -> str:
+        """Read the receive interface into the cache; return the fault reason ("" if fine)."""
+        r, c = self._rcv, self._ctl
+
+        def read_all() -> tuple[Any, ...]:
+            return (r.isConnected() and c.isConnected(), r.getTimestamp(), r.getActualQ(), r.getActualQd(),
+                    r.getActualCurrent(), r.getActualTCPPose(), r.getRobotMode(), r.getSafetyMode(),
+                    r.getSafetyStatusBits(), r.getRuntimeState())
+
+        conn, ts, q, qd, cur, tcp, rmode, smode, sbits, rt = self._call("receive getters", read_all)
+        now = self.clock.now()
+        fault = ""
+        if not conn:
+            fault = f"connection lost: RTDE link to {self.config.host} closed"
+        else:
+            if ts != self._last_ts:
+                self._last_ts, self._last_fresh = ts, now
+            elif now - self._last_fresh > self.config.stale_timeout:
+                fault = (f"connection lost: no new RTDE data from {self.config.host} for "
+                         f"{now - self._last_fresh:.2f} s")
+        if not fault:
+            fault = _controller_fault(int(rmode), int(smode), int(sbits), int(rt))
+        with self._lock:
+            self._state = JointState(urmodel.JOINT_NAMES, tuple(q), tuple(qd), tuple(cur), now)
+            self._tcp_pose = list(tcp)
+            self._have_state = True
+            self._status = URStatus(not fault.startswith("connection lost"), int(rmode), int(smode), int(rt), fault, now)
+        return fault
+
+    def _cycle(self) -> None:
+        fault = self._read()
+        m = self._motion
+        if fault.startswith("connection lost"):
+            self._lose_link(fault)
+            return
+        if m is None:
+            return
+        if fault:
+            self._finish(m, fail=fault)
+            if m.phase != "start":
+                self._safe_stop_call(m)
+            return
+        self._advance(m)
+
+    def _start_motion(self, m: _Motion) -> None:
+        if m.goal.done():
+            self._unwatch(m.goal)
+            return
+        if self._link_lost or self._ctl is None:
+            self._finish(m, fail=self._link_lost or "arm not connected")
+            return
+        self._motion = m
+        m.t0 = m.t_phase = self.clock.now()
+        if m.kind == "move":
+            acc = min(self.config.move_acceleration, self.config.acceleration_limit)
+            ok = self._call("moveJ", self._ctl.moveJ, [float(x) for x in m.target], m.speed, acc, True)
+            if not ok:
+                self._finish(m, fail=f"controller refused moveJ ({self._why_refused()})")
+                return
+        m.phase = "run"
+        self._advance(m)
+
+    def _advance(self, m: _Motion) -> None:
+        now = self.clock.now()
+        cfg = self.config
+        with self._lock:
+            q = np.array(self._state.positions)
+            qd = np.array(self._state.velocities)
+        at_rest = float(np.max(np.abs(qd))) < cfg.rest_speed
+        if m.phase == "stopping":
+            if at_rest and (m.kind == "servo" or self._call("isSteady", self._ctl.isSteady)):
+                self._finish(m, cancelled=True)
+            elif now - m.t_phase > cfg.stop_timeout:
+                self._finish(m, fail=f"arm did not come to rest within {cfg.stop_timeout:.1f} s after stopping")
+            return
+        t = now - m.t0
+        err = np.abs(q - m.target)
+        reached = float(np.max(err)) < cfg.goal_tolerance and at_rest
+        if m.kind == "servo":
+            assert m.points is not None
+            q_cmd = _sample(m.times, m.points, t)
+            if m.last_cmd is not None:  # defence in depth: never step faster than the limits
+                vmax = np.array([lim.velocity for lim in self._limits]) * max(now - m.t_phase, 1.0 / cfg.frequency)
+                q_cmd = np.clip(q_cmd, m.last_cmd - vmax, m.last_cmd + vmax)
+            m.last_cmd, m.t_phase = q_cmd, now
+            if reached and t >= m.times[-1]:
+                self._call("servoStop", self._ctl.servoStop, cfg.stop_deceleration)
+                self._finish(m)
+                return
+            ok = self._call("servoJ", self._ctl.servoJ, [float(x) for x in q_cmd], 0.0, 0.0,
+                            1.0 / cfg.frequency, cfg.servo_lookahead, cfg.servo_gain)
+            if not ok:
+                self._finish(m, fail=f"controller refused servoJ ({self._why_refused()})")
+                return
+        elif reached:
+            self._finish(m)
+            return
+        if t > m.expected + cfg.settle_timeout:
+            j = int(np.argmax(err))
+            self._begin_stop(m)
+            self._finish(m, fail=f"did not reach the goal within {m.expected + cfg.settle_timeout:.2f} s: "
+                                 f"{self.joint_names[j]} off by {err[j]:.4f} rad")
+
+    def _begin_stop(self, m: _Motion) -> None:
+        m.phase, m.t_phase = "stopping", self.clock.now()
+        self._safe_stop_call(m)
+
+    def _safe_stop_call(self, m: _Motion) -> None:
+        if m.kind == "servo":
+            self._call("servoStop", self._ctl.servoStop, self.config.stop_deceleration)
+        else:
+            self._call("stopJ", self._ctl.stopJ, self.config.stop_deceleration, True)
+
+    def _finish(self, m: _Motion, *, fail: str = "", cancelled: bool = False) -> None:
+        if fail:
+            log.warning("UR %s: %s failed: %s", self.config.host, m.goal.name, fail)
+            m.goal.fail(fail)
+        elif cancelled:
+            m.goal.mark_cancelled("cancelled")
+        else:
+            m.goal.succeed()
+        if self._motion is m:
+            self._motion = None
+        self._unwatch(m.goal)
+
+    def _why_refused(self) -> str:
+        with self._lock:
+            st = self._status
+        return st.fault or (f"safety mode {st.safety_mode}, runtime state {st.runtime_state}")
+
+    def _lose_link(self, reason: str) -> None:
+        if self._link_lost:
+            return
+        log.error("UR %s: %s", self.config.host, reason)
+        self._link_lost = reason
+        m = self._motion
+        if m is not None:
+            self._finish(m, fail=reason)
+        with self._lock:
+            goals, self._watched = self._watched, []
+            self._busy = None
+            st = self._status
+            self._status = URStatus(False, st.robot_mode, st.safety_mode, st.runtime_state, reason, self.clock.now())
+        for g in goals:
+            if g.name not in ("connect", "reconnect"):
+                g.fail(reason)
+        self._disconnect_all()
+
+    def _safe_disconnect(self, iface: Any) -> None:
+        if iface is None:
+            return
+        try:
+            self._call("disconnect", iface.disconnect)
+        except (RuntimeError, _Stalled) as e:  # doc 4.3: disconnect() may raise "Broken pipe"
+            log.info("UR %s: disconnect: %s", self.config.host, _one_line(e))
+
+    def _disconnect_all(self) -> None:
+        ctl, rcv = self._ctl, self._rcv
+        self._ctl = self._rcv = None
+        self._safe_disconnect(ctl)
+        self._safe_disconnect(rcv)
+
+    def _teardown(self, reason: str) -> None:
+        """Leave the arm stopped and disconnected (worker thread, on close)."""
+        m = self._motion
+        if m is not None:
+            self._finish(m, fail=reason)
+        ctl = self._ctl
+        if ctl is not None and not self._link_lost:
+            for name, fn, args in (("servoStop", ctl.servoStop, (self.config.stop_deceleration,)),
+                                   ("stopJ", ctl.stopJ, (self.config.stop_deceleration, True))):
+                try:
+                    self._call(name, fn, *args)
+                except (RuntimeError, _Stalled) as e:
+                    log.warning("UR %s: %s on close failed: %s", self.config.host, name, _one_line(e))
+        self._disconnect_all()
+        with self._lock:
+            goals, self._watched, self._busy = self._watched, [], None
+            self._status = URStatus(False, self._status.robot_mode, self._status.safety_mode,
+                                    self._status.runtime_state, "closed", self.clock.now())
+        for g in goals:
+            g.fail(reason)
+
+
+def _controller_fault(robot_mode: int, safety_mode: int, safety_bits: int, runtime_state: int) -> str:
+    """Reason the controller cannot move the arm now, or ""."""
+    if safety_mode == 3 or safety_bits & (1 << 2):
+        return "protective stop"
+    if safety_mode in (6, 7) or safety_bits & (1 << 7):
+        return f"emergency stop ({SAFETY_MODES.get(safety_mode, safety_mode)})"
+    if safety_mode in (5, 12, 13):
+        return f"safeguard stop ({SAFETY_MODES[safety_mode]})"
+    if safety_mode not in (1, 2):
+        return f"safety fault (safety mode {safety_mode}: {SAFETY_MODES.get(safety_mode, 'unknown')})"
+    if runtime_state != 2:
+        return f"program stopped (runtime state {runtime_state}: {RUNTIME_STATES.get(runtime_state, 'unknown')})"
+    if robot_mode != 7:
+        return f"robot not running (robot mode {robot_mode}: {ROBOT_MODES.get(robot_mode, 'unknown')})"
+    return ""
+
+
+def _sample(times: Sequence[float], points: np.ndarray, t: float) -> np.ndarray:
+    """Linear interpolation of ``points`` (rows) at ``t`` within ``times`` (clamped)."""
+    if t >= times[-1]:
+        return points[-1]
+    i = int(np.searchsorted(times, t, side="right"))
+    t0, t1 = times[i - 1], times[i]
+    a = (t - t0) / (t1 - t0)
+    return points[i - 1] + a * (points[i] - points[i - 1])
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split())

@@ -1,0 +1,48 @@
+"""Shared helpers for the UR driver tests: bounded real-time waits, a stepped clock loop."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import threading
+import time
+from collections.abc import Callable
+
+from mmexec.drivers.interfaces import Goal, ManualClock
+from mmexec.drivers.ur.arm import URArm
+
+_hosts = itertools.count((os.getpid() % 200) + 2)
+
+
+def loopback_host() -> str:
+    """A fresh 127.0.0.X address so stubs (which must use port 30004) never collide."""
+    return f"127.0.0.{next(_hosts) % 250 + 2}"
+
+
+def wait_for(pred: Callable[[], bool], timeout: float = 2.0) -> bool:
+    """Poll ``pred`` every 2 ms of real time until true or ``timeout`` s pass."""
+    ev = threading.Event()
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        ev.wait(0.002)
+    return pred()
+
+
+def sync(arm: URArm, clock: ManualClock) -> None:
+    """Wait until the worker has read the controller at the clock's current time."""
+    now = clock.now()
+    assert wait_for(lambda: arm.state().stamp >= now or not arm.connected), "worker did not cycle"
+
+
+def step_until(arm: URArm, clock: ManualClock, goal: Goal, dt: float = 0.02, limit: float = 10.0) -> float:
+    """Advance the clock by ``dt`` per step (letting the worker cycle each time) until the
+    goal is done; returns the clock time it took. Fails after ``limit`` clock seconds."""
+    t0 = clock.now()
+    while not goal.done():
+        assert clock.now() - t0 < limit, f"{goal} not done after {limit} s of clock time"
+        clock.advance(dt)
+        sync(arm, clock)
+        sync(arm, clock)  # one more cycle: the command sent after the read has been applied
+    return clock.now() - t0
