@@ -249,8 +249,17 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 
 
 def _cmd_show(args: argparse.Namespace) -> int:
-    from mmexec.executive import display
+    import importlib
+
     from mmexec.executive.compiler import load_mission
+
+    try:
+        display = importlib.import_module("mmexec.executive.display")
+    except ModuleNotFoundError as e:
+        if e.name != "mmexec.executive.display":
+            raise
+        raise UsageError("mmexec show: tree display is not available in this installation "
+                         "(module mmexec.executive.display not found)") from None
 
     _load_for_mission(args.config)
     mission = load_mission(args.mission)

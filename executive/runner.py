@@ -221,6 +221,11 @@ class Runner:
         self._rejected_digest = ""
         self._recoveries = 0
         self._skill_failures = 0
+        self._log_listeners: list[Callable[[dict[str, Any]], None]] = []
+
+    def add_log_listener(self, fn: Callable[[dict[str, Any]], None]) -> None:
+        """Call ``fn(record)`` after each event-log record is written (live displays, tests)."""
+        self._log_listeners.append(fn)
 
     # ------------------------------------------------------------------ input
 
@@ -307,6 +312,8 @@ class Runner:
             robot = self.robot
             self.log.clock = robot.clock.now
             self.log.add_listener(self._count_events)
+            for fn in self._log_listeners:
+                self.log.add_listener(fn)
             rate = opts.rate_hz if opts.rate_hz is not None else self.config.config.rate_hz
             self.log.write(
                 "run_start",
