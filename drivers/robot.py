@@ -1,0 +1,505 @@
+"""The ``robot`` backend: a run config's ``robot:`` section into a :class:`RealRobot`.
+
+Section schema (every device optional; see docs/drivers/bringup.md)::
+
+    robot:
+      name: locobot
+      base:    {kind: kobuki, port: /dev/kobuki, start: [x, y, theta], ...KobukiConfig keys}
+      arm:     {kind: wx250s, port: /dev/ttyDXL, baudrate: 1000000, locobot: true, ...WX250sConfig keys}
+               # or {kind: ur, host: 192.168.1.10, ...}
+      gripper: {kind: wx250s_gripper}                         # the arm's own gripper servo
+               # or {kind: robotiq_rtu, port: /dev/ttyUSB0, slave: 9, max_force: 100, activate: true}
+               # or {kind: robotiq_urcap, host: 192.168.1.10, ...}
+      camera:  {kind: uvc | realsense, device: 0, width: 640, height: 480, fps: 30,
+                intrinsics: {fx, fy, cx, cy, dist}, mount: {xyz: [..], rpy: [..]}}
+      map:     {yaml: maps/lab.yaml}                           # map_server YAML + PGM
+      scene:   [{name: shelf, size: [x, y, z], xyz: [..], rpy: [..]}]   # static boxes in map
+
+Two phases, as everywhere in mmexec: the whole section is bound and checked first
+(every problem reported as ``FILE:LINE:COL: robot.key: message``), then devices are
+constructed lazily by ``kind`` through :data:`DEVICE_KINDS` (driver modules are
+imported only when a config names them) and connected in order base, arm, gripper,
+camera. A device that does not answer raises :class:`DeviceUnavailable`, a one-line
+error naming the config line, the device and its port, after closing what was opened.
+Relative paths (``map.yaml``) are relative to the config file.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, did_you_mean
+from mmexec.drivers.interfaces import Clock, OccupancyGrid, Pose2D, Robot, SceneBox
+
+__all__ = [
+    "DEVICE_KINDS",
+    "DeviceUnavailable",
+    "MonotonicClock",
+    "RealRobot",
+    "build",
+    "check",
+    "pose_matrix",
+]
+
+log = logging.getLogger(__name__)
+
+
+class MonotonicClock(Clock):
+    """Wall-clock seconds since construction, from ``time.monotonic()`` (never jumps)."""
+
+    def __init__(self) -> None:
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._t0
+
+
+class DeviceUnavailable(InputError):
+    """A configured device could not be brought up (no such port, no answer, fault).
+
+    An :class:`InputError` located at the device's config section, because the fix is
+    usually there or in the wiring: ``FILE:LINE:COL: robot.base: kobuki on PORT: reason``.
+    """
+
+
+# --------------------------------------------------------------------------- robot
+
+
+class RealRobot(Robot):
+    """The real robot: capabilities backed by drivers, a monotonic wall clock."""
+
+    def __init__(self, name: str, profile: Mapping[str, Any], clock: MonotonicClock | None = None) -> None:
+        self.name = name
+        self.clock = clock or MonotonicClock()
+        self.profile = dict(profile)
+        self._closers: list[tuple[str, Callable[[], None]]] = []
+        self._next_tick: float | None = None
+        self.overruns = 0
+
+    def add_closer(self, label: str, closer: Callable[[], None]) -> None:
+        """Register a device shutdown, run (in reverse order) by :meth:`close`."""
+        self._closers.append((label, closer))
+
+    def spin(self, period: float) -> None:
+        """Sleep until the next ``period`` [s] boundary of the wall clock. When the tick
+        ran past the boundary, the schedule restarts from now (counted in ``overruns``)."""
+        if not period > 0:
+            raise ValueError(f"spin period must be > 0 s, got {period}")
+        now = self.clock.now()
+        if self._next_tick is None:
+            self._next_tick = now
+        self._next_tick += period
+        delay = self._next_tick - now
+        if delay < 0:
+            self.overruns += 1
+            log.debug("tick overran its period by %.1f ms", -delay * 1e3)
+            self._next_tick = now
+            return
+        time.sleep(delay)
+
+    def safe_stop(self) -> None:
+        """Base zero velocity, arm holding; gripper unchanged. Never raises."""
+        for label, cap in (("base", self.base), ("arm", self.arm)):
+            if cap is None:
+                continue
+            try:
+                cap.stop()
+            except Exception:  # noqa: BLE001 - best effort on the way down, logged
+                log.exception("safe_stop: %s.stop() failed", label)
+
+    def close(self) -> None:
+        """Stop everything, then close every device (last opened first). Idempotent."""
+        self.safe_stop()
+        closers, self._closers = self._closers, []
+        for label, closer in reversed(closers):
+            try:
+                closer()
+            except Exception:  # noqa: BLE001 - keep closing the others, logged
+                log.exception("close: %s failed", label)
+
+
+# --------------------------------------------------------------------------- section schema
+
+
+@dataclass(frozen=True)
+class MapSection:
+    """``map:``: a map_server map (YAML + PGM), path relative to the config file."""
+
+    yaml: str
+
+
+@dataclass(frozen=True)
+class SceneBoxSection:
+    """One static box: full ``size`` [m], centre ``xyz`` [m] and ``rpy`` [rad] in ``map``."""
+
+    name: str
+    size: tuple[float, float, float]
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def validate(self) -> list[str]:
+        return [] if all(s > 0 for s in self.size) else [f"size: every extent must be > 0 m, got {list(self.size)}"]
+
+
+@dataclass(frozen=True)
+class MountSection:
+    """Sensor mount in ``base_link``: ``xyz`` [m], ``rpy`` [rad] (fixed axes, roll first)."""
+
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class IntrinsicsSection:
+    """Pinhole intrinsics [px] and OpenCV distortion coefficients."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+@dataclass(frozen=True)
+class CameraSection:
+    """``camera:`` for ``kind: uvc`` (OpenCV VideoCapture) or ``realsense`` (pyrealsense2)."""
+
+    kind: str
+    device: int | str = 0
+    width: int = 640
+    height: int = 480
+    fps: float = 30.0
+    intrinsics: IntrinsicsSection | None = None
+    mount: MountSection = field(default_factory=MountSection)
+
+    def validate(self) -> list[str]:
+        out = []
+        if self.width < 1 or self.height < 1:
+            out.append(f"width/height: expected positive pixel counts, got {self.width}x{self.height}")
+        if not self.fps > 0:
+            out.append(f"fps: must be > 0, got {self.fps}")
+        return out
+
+
+def pose_matrix(xyz: tuple[float, float, float], rpy: tuple[float, float, float]) -> np.ndarray:
+    """4x4 transform from a translation [m] and roll, pitch, yaw [rad] (R = Rz Ry Rx)."""
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    T = np.eye(4)
+    T[:3, :3] = [
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ]
+    T[:3, 3] = xyz
+    return T
+
+
+# --------------------------------------------------------------------------- device kinds
+
+
+@dataclass
+class _Ctx:
+    """Build state shared by the device factories."""
+
+    robot: RealRobot
+    problems: Problems
+    devices: dict[str, Any] = field(default_factory=dict)   # slot -> driver device object
+
+
+#: a planned device: (slot, label for errors, mark, connect function returning the capability)
+_Plan = tuple[str, str, Mark, Callable[[], Any]]
+_Factory = Callable[[YDict, str, _Ctx], "_Plan | None"]
+
+
+def _without(section: YDict, *keys: str) -> YDict:
+    """A copy of ``section`` without ``keys``, keeping the marks of the rest."""
+    out = YDict({k: v for k, v in section.items() if k not in keys})
+    out.mark = section.mark
+    out.key_marks = {k: m for k, m in section.key_marks.items() if k not in keys}
+    out.value_marks = {k: m for k, m in section.value_marks.items() if k not in keys}
+    return out
+
+
+def _split(section: YDict, *types: type) -> list[YDict]:
+    """Split ``section``'s keys between dataclasses by field name (first match wins);
+    keys no dataclass knows stay in the first part, so binding reports them."""
+    names = [{f.name for f in dataclasses.fields(t)} for t in types]
+    parts: list[YDict] = []
+    taken: set[str] = set()
+    for i, fields in enumerate(names):
+        keep = [k for k in section if k in fields and k not in taken]
+        if i == 0:
+            known = set().union(*names)
+            keep += [k for k in section if k not in known]
+        taken.update(keep)
+        parts.append(_without(section, *[k for k in section if k not in keep]))
+    return parts
+
+
+def _import(module: str, what: str, mark: Mark, path: str) -> Any:
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        raise InputError.at(
+            mark, f"{path}: {what} needs {module}, which is not in this installation ({e.name} not found)"
+        ) from None
+
+
+def _connect_error(path: str, mark: Mark, message: str) -> DeviceUnavailable:
+    return DeviceUnavailable([Problem(mark, f"{path}: {message}")])
+
+
+def _kobuki(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+    from mmexec.drivers.kobuki.base import KobukiBase
+    from mmexec.drivers.kobuki.device import KobukiConfig, KobukiDevice, KobukiError
+
+    @dataclass(frozen=True)
+    class _Start:
+        start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    cfg_part, start_part = _split(_without(section, "kind"), KobukiConfig, _Start)
+    cfg = bind(KobukiConfig, cfg_part, section.mark, path, ctx.problems)
+    start = bind(_Start, start_part, section.mark, path, ctx.problems)
+    if cfg is None or start is None:
+        return None
+
+    def connect() -> KobukiBase:
+        dev = KobukiDevice(cfg, ctx.robot.clock)
+        try:
+            dev.connect()
+        except KobukiError as e:
+            raise _connect_error(path, section.mark, str(e)) from e
+        ctx.robot.add_closer(f"kobuki on {cfg.port}", dev.close)
+        dev.reset_odometry(Pose2D(*start.start))
+        return KobukiBase(dev)
+
+    return ("base", f"kobuki on {cfg.port}", section.mark, connect)
+
+
+def _wx250s(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+    mod = _import("mmexec.drivers.dynamixel.wx250s", "kind 'wx250s'", section.value_mark("kind"), path)
+    cfg = bind(mod.WX250sConfig, _without(section, "kind"), section.mark, path, ctx.problems)
+    if cfg is None:
+        return None
+    bus_mod = _import("mmexec.drivers.dynamixel.bus", "kind 'wx250s'", section.value_mark("kind"), path)
+    device = mod.WX250s(cfg, clock=ctx.robot.clock)
+    ctx.devices["arm"] = device
+
+    def connect() -> Any:
+        try:
+            device.connect()
+        except bus_mod.DynamixelError as e:
+            raise _connect_error(path, section.mark, f"wx250s on {cfg.port}: {e}") from e
+        ctx.robot.add_closer(f"wx250s on {cfg.port}", device.close)
+        return mod.WX250sArm(device)
+
+    return ("arm", f"wx250s on {cfg.port}", section.mark, connect)
+
+
+def _wx250s_gripper(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+    extra = [k for k in section if k != "kind"]
+    for k in extra:
+        ctx.problems.add(section.key_mark(k), f"{path}.{k}: unknown key (the wx250s gripper is set up in the arm section)")
+    if extra:
+        return None
+    if "arm" not in ctx.devices:
+        ctx.problems.add(section.value_mark("kind"), f"{path}.kind: 'wx250s_gripper' needs 'arm: {{kind: wx250s}}'")
+        return None
+    mod = _import("mmexec.drivers.dynamixel.wx250s", "kind 'wx250s_gripper'", section.value_mark("kind"), path)
+    device = ctx.devices["arm"]
+    return ("gripper", "wx250s gripper", section.mark, lambda: mod.WX250sGripper(device))
+
+
+def _robotiq_rtu(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+    dev_mod = _import("mmexec.drivers.robotiq.device", "kind 'robotiq_rtu'", section.value_mark("kind"), path)
+    from mmexec.drivers.robotiq.core import DeviceSettings
+    from mmexec.drivers.robotiq.errors import RobotiqError
+    from mmexec.drivers.robotiq.gripper import RobotiqGripper
+
+    @dataclass(frozen=True)
+    class _Activate:
+        activate: bool = True
+
+    link_part, dev_part, act_part = _split(_without(section, "kind"), dev_mod.ModbusSettings, DeviceSettings, _Activate)
+    link = bind(dev_mod.ModbusSettings, link_part, section.mark, path, ctx.problems)
+    settings = bind(DeviceSettings, dev_part, section.mark, path, ctx.problems)
+    act = bind(_Activate, act_part, section.mark, path, ctx.problems)
+    if link is None or settings is None or act is None:
+        return None
+
+    def connect() -> RobotiqGripper:
+        device = dev_mod.RobotiqModbus(link, settings, ctx.robot.clock)
+        gripper = RobotiqGripper(device)
+        try:
+            gripper.setup(activate=act.activate)
+        except RobotiqError as e:
+            device.close()
+            raise _connect_error(path, section.mark, f"robotiq on {link.port}: {e}") from e
+        ctx.robot.add_closer(f"robotiq on {link.port}", device.close)
+        return gripper
+
+    return ("gripper", f"robotiq on {link.port}", section.mark, connect)
+
+
+def _unavailable(kind: str, module: str) -> _Factory:
+    """Factory for a kind whose driver is written elsewhere and not wired here yet."""
+
+    def factory(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+        _import(module, f"kind {kind!r}", section.value_mark("kind"), path)
+        raise InputError.at(
+            section.value_mark("kind"),
+            f"{path}.kind: {kind!r} is not supported by the robot backend yet ({module} exists but is not wired in)",
+        )
+
+    return factory
+
+
+def _camera(kind: str) -> _Factory:
+    def factory(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+        cam = bind(CameraSection, section, section.mark, path, ctx.problems)
+        if cam is None:
+            return None
+        return _unavailable(kind, f"mmexec.drivers.camera.{kind}")(section, path, ctx)
+
+    return factory
+
+
+#: slot -> kind -> factory (import of the driver module happens inside the factory)
+DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
+    "base": {"kobuki": _kobuki},
+    "arm": {"wx250s": _wx250s, "ur": _unavailable("ur", "mmexec.drivers.ur.arm")},
+    "gripper": {
+        "wx250s_gripper": _wx250s_gripper,
+        "robotiq_rtu": _robotiq_rtu,
+        "robotiq_urcap": _unavailable("robotiq_urcap", "mmexec.drivers.robotiq.urcap"),
+    },
+    "camera": {"uvc": _camera("uvc"), "realsense": _camera("realsense")},
+}
+
+_TOP_KEYS = ("name", "base", "arm", "gripper", "camera", "map", "scene")
+
+
+# --------------------------------------------------------------------------- build
+
+
+def build(
+    section: YDict | None,
+    *,
+    profile: Mapping[str, Any],
+    seed: int | None,
+    options: Mapping[str, Any],
+) -> RealRobot:
+    """Backend builder for ``backend: robot`` (see the module doc).
+
+    ``seed`` has no effect on real hardware; ``options`` (``gui``, ``record``) neither.
+    Raises :class:`InputError` for a bad section (all problems at once, before any port
+    is opened) and :class:`DeviceUnavailable` for a device that cannot be brought up.
+    """
+    robot, plans = _plan(section, profile)
+    try:
+        for slot, label, _mark, connect in plans:
+            log.info("robot: bringing up %s: %s", slot, label)
+            setattr(robot, slot, connect())
+    except BaseException:
+        robot.close()
+        raise
+    return robot
+
+
+def check(section: YDict | None, *, profile: Mapping[str, Any] | None = None) -> list[str]:
+    """Validate a ``robot:`` section without opening any port: returns the devices it
+    would bring up (``"base: kobuki on /dev/kobuki"``, ...) or raises InputError."""
+    robot, plans = _plan(section, profile or {})
+    return [f"{slot}: {label}" for slot, label, _m, _c in plans]
+
+
+def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot, list[_Plan]]:
+    if section is None or not isinstance(section, YDict):
+        mark = getattr(section, "mark", Mark("<config>", 1, 1))
+        raise InputError.at(mark, "robot: missing section (expected a mapping with base / arm / gripper / camera)")
+    problems = Problems()
+    for key in section:
+        if key not in _TOP_KEYS:
+            problems.add(section.key_mark(key), f"robot.{key}: unknown key"
+                         + (did_you_mean(key, _TOP_KEYS) or f" (expected one of: {', '.join(_TOP_KEYS)})"))
+    name = section.get("name", "robot")
+    if not isinstance(name, str):
+        problems.add(section.value_mark("name"), f"robot.name: expected a string, got {name!r}")
+        name = "robot"
+    robot = RealRobot(name, profile)
+    ctx = _Ctx(robot, problems)
+    plans: list[_Plan] = []
+    for slot in ("base", "arm", "gripper", "camera"):
+        if slot not in section:
+            continue
+        sub, path = section[slot], f"robot.{slot}"
+        if not isinstance(sub, YDict):
+            problems.add(section.value_mark(slot), f"{path}: expected a mapping with 'kind', got {sub!r}")
+            continue
+        kinds = DEVICE_KINDS[slot]
+        kind = sub.get("kind")
+        if kind is None:
+            problems.add(sub.mark, f"{path}.kind: missing required key (expected one of: {', '.join(kinds)})")
+            continue
+        if kind not in kinds:
+            problems.add(sub.value_mark("kind"), f"{path}.kind: unknown kind {kind!r}"
+                         + (did_you_mean(str(kind), kinds) or f" (expected one of: {', '.join(kinds)})"))
+            continue
+        try:
+            plan = kinds[kind](sub, path, ctx)
+        except InputError as e:
+            problems.extend(e.problems)
+            continue
+        if plan is not None:
+            plans.append(plan)
+    robot.occupancy = _load_map(section, problems)
+    robot.scene = _load_scene(section, problems)
+    problems.raise_if_any()
+    return robot, plans
+
+
+def _load_map(section: YDict, problems: Problems) -> OccupancyGrid | None:
+    if "map" not in section:
+        return None
+    before = len(problems)
+    m = bind(MapSection, section["map"], section.value_mark("map"), "robot.map", problems)
+    if m is None or len(problems) > before:
+        return None
+    where = section["map"].value_mark("yaml") if isinstance(section["map"], YDict) else section.value_mark("map")
+    path = Path(m.yaml)
+    if not path.is_absolute():
+        path = Path(where.file).parent / path
+    try:
+        from mmexec.skills.navigation.grid import load_map
+    except ImportError as e:
+        problems.add(where, f"robot.map.yaml: the map loader is not available ({e})")
+        return None
+    if not path.exists():
+        problems.add(where, f"robot.map.yaml: no such file {str(path)!r}")
+        return None
+    try:
+        return load_map(path)
+    except InputError as e:
+        problems.extend(e.problems)
+        return None
+
+
+def _load_scene(section: YDict, problems: Problems) -> tuple[SceneBox, ...]:
+    if "scene" not in section:
+        return ()
+    boxes = bind(list[SceneBoxSection], section["scene"], section.value_mark("scene"), "robot.scene", problems)
+    if not boxes:
+        return ()
+    return tuple(SceneBox(b.name, pose_matrix(b.xyz, b.rpy), b.size) for b in boxes if b is not None)
