@@ -31,7 +31,7 @@ from py_trees.common import Status
 from mmexec.config.yamlload import InputError, Mark, Problems, did_you_mean, load_yaml_bytes, load_yaml_text
 from mmexec.executive import nodes as N
 from mmexec.executive.context import ExecContext
-from mmexec.executive.schema import FAILURE_KEYS, TYPE_NAMES, FileSpec, NodeSpec, ParamDecl, parse_file
+from mmexec.executive.schema import FAILURE_KEYS, TYPE_NAMES, FileSpec, NodeSpec, ParamDecl, parse_file, type_compatible
 from mmexec.executive.values import Const, Expr, substitute
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
@@ -301,7 +301,7 @@ class _Loader:
         self.stack: list[Path] = []
         self.display: dict[Path, str] = {}
 
-    def load(self, path: Path, display: str, mark: Mark | None) -> FileSpec | None:
+    def load(self, path: Path, display: str, mark: Mark | None, label: str = "") -> FileSpec | None:
         key = path.resolve()
         if key in self.stack:
             chain = " -> ".join(self.display[p] for p in self.stack[self.stack.index(key):]) + f" -> {display}"
@@ -317,7 +317,7 @@ class _Loader:
         try:
             if not key.is_file():
                 where = mark or Mark(display, 1, 1)
-                self.p.add(where, f"include {display!r}: no such file" if mark else "no such file")
+                self.p.add(where, f"include {label or repr(display)}: no such file ({key})" if mark else "no such file")
                 self.files[key] = None
                 return None
             data = key.read_bytes()
@@ -346,7 +346,7 @@ class _Loader:
     def include(self, base: Path, base_display: str, rel: str, mark: Mark) -> FileSpec | None:
         target = (base.parent / rel)
         shown = str(Path(base_display).parent / rel)
-        return self.load(target, shown, mark)
+        return self.load(target, shown, mark, repr(rel))
 
 
 def _count(spec: NodeSpec, memo: dict[int, int]) -> int:
@@ -390,6 +390,10 @@ def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY) -> Missio
                 else:
                     msg = f"blackboard key {key!r} is read but nothing writes it{hint or ''} (a skill output, request.<field>, a parameter, or recovery bookkeeping)"
                 problems.add(mark, msg)
+        for key, want, mark, prefix, raw in s.typed_reads:
+            have = writes.get(key)
+            if key in writes and not type_compatible(want, have):
+                problems.add(mark, f"{prefix}, but {raw!r} is {have.__name__ if have else '?'}")
         if s is not top:
             for r, d in s.requests.items():
                 if r not in top.requests:

@@ -114,6 +114,8 @@ class FileSpec:
     writes: dict[str, type | None] = field(default_factory=dict)
     #: included files, by include node
     includes: list[NodeSpec] = field(default_factory=list)
+    #: blackboard reads whose type must fit a skill parameter: (key, type, mark, message prefix, raw)
+    typed_reads: list[tuple[str, type, Mark, str, Any]] = field(default_factory=list)
 
 
 def _tname(value: Any) -> str:
@@ -166,6 +168,7 @@ class _Parser:
         self.reads: list[tuple[str, Mark]] = []
         self.writes: dict[str, type | None] = {}
         self.includes: list[NodeSpec] = []
+        self.typed_reads: list[tuple[str, type, Mark, str, Any]] = []
 
     def err(self, mark: Mark, msg: str) -> None:
         self.p.add(mark, msg)
@@ -201,7 +204,8 @@ class _Parser:
             tree = self.node(doc["tree"], doc.value_mark("tree"), 0)
         for r in requests:
             self.writes[f"request.{r}"] = requests[r].type
-        return FileSpec(self.path, name, desc, self.params, requests, tree, doc.mark, self.reads, self.writes, self.includes)
+        return FileSpec(self.path, name, desc, self.params, requests, tree, doc.mark, self.reads, self.writes,
+                        self.includes, self.typed_reads)
 
     def decls(self, doc: YDict, key: str, allow_default: bool) -> dict[str, ParamDecl]:
         out: dict[str, ParamDecl] = {}
@@ -541,7 +545,9 @@ class _Parser:
             return
         t = self.static_type(e)
         if isinstance(e, Ref):
-            t = None  # checked globally once all writes are known (compiler), else at run time
+            # checked by the compiler once every write is known; else by the leaf at run time
+            self.typed_reads.append((e.key, decl.type, mark, f"{where} expects {decl.type_name()}", raw))
+            return
         if not type_compatible(decl.type, t):
             self.err(mark, f"{where} expects {decl.type_name()}, but {raw!r} is {t.__name__ if t else '?'}")
 
