@@ -27,6 +27,7 @@ Relative paths (``map.yaml``) are relative to the config file.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import time
@@ -322,8 +323,15 @@ def _wx250s_gripper(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
     return ("gripper", "wx250s gripper", section.mark, lambda: mod.WX250sGripper(device))
 
 
-def _robotiq_rtu(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
-    dev_mod = _import("mmexec.drivers.robotiq.device", "kind 'robotiq_rtu'", section.value_mark("kind"), path)
+def _robotiq(section: YDict, path: str, ctx: _Ctx, *, kind: str) -> _Plan | None:
+    """``robotiq_rtu`` (Modbus RTU on a serial port) or ``robotiq_urcap`` (UR socket)."""
+    mark = section.value_mark("kind")
+    if kind == "robotiq_rtu":
+        mod = _import("mmexec.drivers.robotiq.device", f"kind {kind!r}", mark, path)
+        link_type, device_type = mod.ModbusSettings, mod.RobotiqModbus
+    else:
+        mod = _import("mmexec.drivers.robotiq.urcap", f"kind {kind!r}", mark, path)
+        link_type, device_type = mod.URCapSettings, mod.RobotiqURCap
     from mmexec.drivers.robotiq.core import DeviceSettings
     from mmexec.drivers.robotiq.errors import RobotiqError
     from mmexec.drivers.robotiq.gripper import RobotiqGripper
@@ -332,25 +340,46 @@ def _robotiq_rtu(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
     class _Activate:
         activate: bool = True
 
-    link_part, dev_part, act_part = _split(_without(section, "kind"), dev_mod.ModbusSettings, DeviceSettings, _Activate)
-    link = bind(dev_mod.ModbusSettings, link_part, section.mark, path, ctx.problems)
+    link_part, dev_part, act_part = _split(_without(section, "kind"), link_type, DeviceSettings, _Activate)
+    link = bind(link_type, link_part, section.mark, path, ctx.problems)
     settings = bind(DeviceSettings, dev_part, section.mark, path, ctx.problems)
     act = bind(_Activate, act_part, section.mark, path, ctx.problems)
     if link is None or settings is None or act is None:
         return None
+    where = f"robotiq on {link.port}" if kind == "robotiq_rtu" else f"robotiq on {link.host}:{link.port}"
 
     def connect() -> RobotiqGripper:
-        device = dev_mod.RobotiqModbus(link, settings, ctx.robot.clock)
+        device = device_type(link, settings, ctx.robot.clock)
         gripper = RobotiqGripper(device)
         try:
             gripper.setup(activate=act.activate)
         except RobotiqError as e:
             device.close()
-            raise _connect_error(path, section.mark, f"robotiq on {link.port}: {e}") from e
-        ctx.robot.add_closer(f"robotiq on {link.port}", device.close)
+            raise _connect_error(path, section.mark, f"{where}: {e}") from e
+        ctx.robot.add_closer(where, device.close)
         return gripper
 
-    return ("gripper", f"robotiq on {link.port}", section.mark, connect)
+    return ("gripper", where, section.mark, connect)
+
+
+def _ur(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+    mod = _import("mmexec.drivers.ur.arm", "kind 'ur'", section.value_mark("kind"), path)
+    cfg = bind(mod.URArmConfig, _without(section, "kind"), section.mark, path, ctx.problems)
+    if cfg is None:
+        return None
+    where = f"{cfg.model} at {cfg.host}"
+
+    def connect() -> Any:
+        arm = mod.URArm(cfg, clock=ctx.robot.clock)
+        try:
+            arm.open()
+        except mod.URConnectionError as e:
+            arm.close()
+            raise _connect_error(path, section.mark, f"{where}: {e}") from e
+        ctx.robot.add_closer(where, arm.close)
+        return arm
+
+    return ("arm", where, section.mark, connect)
 
 
 def _unavailable(kind: str, module: str) -> _Factory:
@@ -379,11 +408,11 @@ def _camera(kind: str) -> _Factory:
 #: slot -> kind -> factory (import of the driver module happens inside the factory)
 DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
     "base": {"kobuki": _kobuki},
-    "arm": {"wx250s": _wx250s, "ur": _unavailable("ur", "mmexec.drivers.ur.arm")},
+    "arm": {"wx250s": _wx250s, "ur": _ur},
     "gripper": {
         "wx250s_gripper": _wx250s_gripper,
-        "robotiq_rtu": _robotiq_rtu,
-        "robotiq_urcap": _unavailable("robotiq_urcap", "mmexec.drivers.robotiq.urcap"),
+        "robotiq_rtu": functools.partial(_robotiq, kind="robotiq_rtu"),
+        "robotiq_urcap": functools.partial(_robotiq, kind="robotiq_urcap"),
     },
     "camera": {"uvc": _camera("uvc"), "realsense": _camera("realsense")},
 }

@@ -187,6 +187,43 @@ def test_shipped_locobot_config_is_valid() -> None:
 def test_shipped_ur5e_config_loads() -> None:
     loaded = load_config(REPO / "config" / "ur5e.yaml")
     assert loaded.backend == "robot"
-    section = loaded.section()
-    assert section is not None and section["arm"]["kind"] == "ur"
+    assert rb.check(loaded.section(), profile=loaded.config.profile) == [
+        "arm: ur5e at 192.168.1.10", "gripper: robotiq on 192.168.1.10:63352",
+    ]
     assert len(loaded.config.profile["named_poses"]["home"]) == 6
+
+
+def test_build_base_and_robotiq_gripper_from_fakes(tmp_path: Path, fake: KobukiFake) -> None:
+    from mmexec.drivers.fakes.robotiq import FakeRobotiq
+    from mmexec.drivers.robotiq.gripper import RobotiqGripper
+
+    grip = FakeRobotiq()
+    grip.start()
+    try:
+        cfg = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}}}\n"
+                                f"  gripper: {{kind: robotiq_rtu, port: {grip.port}, max_force: 100.0}}\n")
+        robot = build_robot(load_config(cfg))
+        try:
+            assert isinstance(robot.gripper, RobotiqGripper) and robot.gripper.max_force == 100.0
+            assert robot.base is not None and not robot.base.state().faults
+        finally:
+            robot.close()
+    finally:
+        grip.stop()
+
+
+def test_gripper_that_does_not_answer_closes_the_base(tmp_path: Path, fake: KobukiFake) -> None:
+    from mmexec.drivers.fakes.robotiq import FakeRobotiq
+
+    grip = FakeRobotiq()
+    grip.start()
+    grip.silent = True
+    try:
+        cfg = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}}}\n"
+                                f"  gripper: {{kind: robotiq_rtu, port: {grip.port}}}\n")
+        with pytest.raises(rb.DeviceUnavailable) as ei:
+            build_robot(load_config(cfg))
+        msg = str(ei.value)
+        assert "\n" not in msg and msg.startswith(f"{cfg}:5:12: robot.gripper: robotiq on {grip.port}: ")
+    finally:
+        grip.stop()
