@@ -23,11 +23,11 @@ import logging
 import os
 import sys
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
 from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
+from mmexec.executive.runner import ArgMark, BackendStartError
 
 __all__ = ["main"]
 
@@ -35,14 +35,6 @@ EXIT_OK, EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 #: The requests ``mmexec demo`` serves.
 DEMO_REQUESTS: tuple[dict[str, str], ...] = ({"item": "1"}, {"item": "2"})
-
-
-@dataclass(frozen=True)
-class ArgMark(Mark):
-    """Where a command-line value came from, printed as ``--request #2``."""
-
-    def __str__(self) -> str:
-        return f"{self.file} #{self.line}"
 
 
 class UsageError(Exception):
@@ -404,8 +396,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if os.environ.get("MMEXEC_DEBUG") else logging.WARNING,
                         format="mmexec: %(levelname)s: %(name)s: %(message)s")
     _CURRENT_LOG[0] = None
-    from mmexec.executive.runner import BackendStartError
-
     try:
         return _dispatch(args)
     except InputError as e:

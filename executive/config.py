@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, load_yaml
+from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, load_yaml
 from mmexec.drivers.interfaces import Robot
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
@@ -191,7 +191,14 @@ def build_robot(
     builder = backend_builder(loaded.backend, loaded.mark("backend"))
     opts = {"gui": False, "record": None}
     opts.update(options or {})
-    robot = builder(loaded.section(), profile=dict(loaded.config.profile), seed=seed, options=opts)
+    try:
+        robot = builder(loaded.section(), profile=dict(loaded.config.profile), seed=seed, options=opts)
+    except InputError as e:
+        # a builder given no section (None) cannot know the file: point at `backend:`
+        where = loaded.mark("backend")
+        raise InputError(
+            Problem(where, p.message) if p.mark.file.startswith("<") else p for p in e.problems
+        ) from None
     if not isinstance(robot, Robot):
         raise TypeError(f"backend {loaded.backend!r} builder returned {type(robot).__name__}, not a Robot")
     return robot

@@ -45,6 +45,7 @@ from mmexec.executive.eventlog import EventLog
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
 __all__ = [
+    "ArgMark",
     "BackendStartError",
     "EXIT_FAILED",
     "EXIT_INPUT",
@@ -66,6 +67,15 @@ EXIT_INPUT = 2
 EXIT_INTERRUPTED = 130
 
 Status = py_trees.common.Status
+
+
+@dataclass(frozen=True)
+class ArgMark(Mark):
+    """Where a command-line value came from, printed as ``--request #2`` (``line`` is the
+    occurrence number; ``line`` 0 prints the name alone)."""
+
+    def __str__(self) -> str:
+        return f"{self.file} #{self.line}" if self.line else self.file
 
 
 class BackendStartError(RuntimeError):
@@ -244,7 +254,7 @@ class Runner:
             raise InputError.at(Mark("--rate", 1, 1), f"tick rate must be in (0, 1000] Hz, got {opts.rate_hz:g}")
 
     def _validate_requests(self, mission: Any) -> list[dict[str, Any]]:
-        reqs = self.options.requests or [Request({}, Mark("(no --request)", 1, 1))]
+        reqs = self.options.requests or [Request({}, ArgMark("mmexec run (no --request given)", 0, 0))]
         problems: list[Problem] = []
         out: list[dict[str, Any]] = []
         for i, req in enumerate(reqs, start=1):
@@ -501,7 +511,7 @@ class Runner:
         self.out.flush()
 
     def _validate_with(self, mission: Any, start: int) -> list[dict[str, Any]]:
-        reqs = self.options.requests or [Request({}, Mark("(no --request)", 1, 1))]
+        reqs = self.options.requests or [Request({}, ArgMark("mmexec run (no --request given)", 0, 0))]
         problems: list[Problem] = []
         out: list[dict[str, Any]] = []
         for i in range(start, len(reqs)):

@@ -75,11 +75,16 @@ def test_backend_section_errors_reach_user(tmp_path: Path) -> None:
         build_robot(loaded)
 
 
-def test_missing_backend_module_is_one_line_error() -> None:
+def test_missing_backend_module_is_one_line_error(monkeypatch: pytest.MonkeyPatch) -> None:
+    import mmexec.executive.config as config_mod
+
+    monkeypatch.setitem(config_mod.BACKENDS, "robot", "mmexec.drivers.not_built_yet_xyz:build")
     with pytest.raises(InputError) as ei:
         backend_builder("robot", Mark("c.yaml", 1, 10))
-    msg = str(ei.value)
-    assert msg.startswith("c.yaml:1:10: backend: 'robot'") and "\n" not in msg
+    assert str(ei.value) == ("c.yaml:1:10: backend: 'robot' is not available in this installation "
+                             "(module mmexec.drivers.not_built_yet_xyz not found)")
+    with pytest.raises(InputError, match="unknown backend 'ros'"):
+        backend_builder("ros", Mark("c.yaml", 1, 10))
 
 
 def test_skill_modules_import_and_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
