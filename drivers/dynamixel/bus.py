@@ -332,6 +332,8 @@ class DxlBus:
         if dxl_id == BROADCAST_ID:
             raise ValueError("use broadcast_ping() for the broadcast id")
         st = self.transact(codec.ping(dxl_id), ((dxl_id, 3),))[dxl_id]
+        if not st.ok:
+            raise ServoError(self.config.port, dxl_id, st.result, "ping")
         if len(st.data) < 3:
             raise CorruptReply(self.config.port, f"ping reply from servo id {dxl_id} too short", dxl_id)
         return PingInfo(dxl_id, st.data[0] | (st.data[1] << 8), st.data[2])

@@ -50,8 +50,9 @@ from mmexec.drivers.dynamixel.bus import (
     NoReply,
     NotConnected,
     PingInfo,
+    ServoError,
 )
-from mmexec.drivers.dynamixel.codec import Status
+from mmexec.drivers.dynamixel.codec import Status, StatusResult
 from mmexec.drivers.dynamixel.control_table import (
     MODELS,
     XL430_W250,
@@ -280,6 +281,12 @@ class WX250sConfig:
             raise ValueError("time-based profile needs 0 <= 2 * profile_acceleration_ms <= profile_velocity_ms")
 
 
+def _detail(e: Exception | None) -> str:
+    if e is None:
+        return "no error recorded"
+    return str(getattr(e, "detail", e))
+
+
 class _MonotonicClock(Clock):
     def now(self) -> float:
         return time.monotonic()
@@ -331,6 +338,7 @@ class WX250s:
         self._state: JointState | None = None
         self._readings: dict[int, ServoReading] = {}
         self._goals_pulses: list[int] = []
+        self._sent_goals: list[int] = []
         self._traj: _TrajRun | None = None
         self._grip: _GripRun | None = None
         self._grip_pwm = 0
@@ -406,7 +414,7 @@ class WX250s:
         cfg, bus = self.config, self.bus
         self.found = {}
         for dxl_id in self.servo_ids():
-            last: DynamixelError | None = None
+            last: Exception | None = None
             for _ in range(cfg.ping_attempts):
                 try:
                     self.found[dxl_id] = bus.ping(dxl_id)
@@ -415,9 +423,13 @@ class WX250s:
                     if isinstance(e, LinkLost):
                         raise
                     last = e
+                except ServoError as e:
+                    if e.result is not StatusResult.CRC_ERROR:
+                        raise
+                    last = e
             if dxl_id not in self.found:
                 raise NoReply(bus.port, f"servo id {dxl_id} ({self.name_of[dxl_id]}) did not answer ping "
-                                        f"({cfg.ping_attempts} attempts): {last.detail if last else ''}", dxl_id)
+                                        f"({cfg.ping_attempts} attempts; last: {_detail(last)})", dxl_id)
             want = self._model_of(dxl_id)
             got = self.found[dxl_id].model
             if got != want.number:
@@ -468,6 +480,7 @@ class WX250s:
             bus.write(dxl_id, TORQUE_ENABLE, b"\x01")
         with self._lock:
             self._goals_pulses = goals
+            self._sent_goals = list(goals)
             self._grip_pwm = 0
             self._faults = {}
             self._update_state(readings)
@@ -713,6 +726,7 @@ class WX250s:
                 goals.append(min(max(p, j.min_pulses), j.max_pulses))
             self._goals_pulses = goals
         self._io.write_goals(goals)
+        self._sent_goals = list(goals)
 
     def _cycle(self) -> None:
         assert self._io is not None
@@ -724,7 +738,10 @@ class WX250s:
         self._advance_trajectory(now)
         with self._lock:
             goals = list(self._goals_pulses)
-        self._io.write_goals(goals)
+        if goals != self._sent_goals:
+            # Sync Write only when a goal changed (every cycle while streaming)
+            self._io.write_goals(goals)
+            self._sent_goals = goals
         self._advance_gripper_pwm()
         try:
             readings = self._io.read_state()

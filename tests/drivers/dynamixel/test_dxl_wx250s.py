@@ -1,0 +1,298 @@
+"""WX250s driver against the fake bus: bring-up, streaming, limits, faults, link loss, gripper."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from mmexec.drivers.dynamixel.bus import HardwareFault, NoReply, PortUnavailable
+from mmexec.drivers.dynamixel.control_table import OperatingMode, pulses_to_rad
+from mmexec.drivers.dynamixel.wx250s import (
+    WX250s,
+    WX250sConfig,
+    gripper_angle_for_width,
+    gripper_width,
+)
+from mmexec.drivers.fakes.dynamixel import FakeDxlBus, wx250s_servos
+from mmexec.drivers.interfaces import Goal, GoalState, GraspState, JointTrajectory
+
+TEST_LATENCY = 0.02  # as in conftest.py: deadlines of tens of ms on a loaded machine
+
+NAMES = ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rotate")
+HOME = (0.0, -0.5, 0.5, 0.0, 0.3, 0.0)
+
+
+def wait(goal: Goal, timeout: float) -> float:
+    """Poll a goal like a tick loop would; return the seconds it took."""
+    t0 = time.monotonic()
+    while not goal.done():
+        assert time.monotonic() - t0 < timeout, f"{goal} not done within {timeout} s"
+        time.sleep(0.005)
+    return time.monotonic() - t0
+
+
+def cfg(port: str, **kw: object) -> WX250sConfig:
+    return WX250sConfig(port=port, latency=TEST_LATENCY, **kw)  # type: ignore[arg-type]
+
+
+@pytest.fixture
+def arm(fake: FakeDxlBus) -> Iterator[WX250s]:
+    dev = WX250s(cfg(fake.port))
+    dev.connect()
+    try:
+        yield dev
+    finally:
+        dev.close()
+
+
+def move_home(dev: WX250s) -> None:
+    goal = dev.arm.follow(JointTrajectory(NAMES, (0.8,), (HOME,)))
+    wait(goal, 3.0)
+    assert goal.state is GoalState.SUCCEEDED, goal.reason
+
+
+def test_construction_does_no_io() -> None:
+    dev = WX250s(WX250sConfig(port="/dev/does-not-exist"))
+    assert not dev.connected
+    with pytest.raises(PortUnavailable, match="/dev/does-not-exist: no such port"):
+        dev.connect()
+    assert dev.arm.follow(JointTrajectory(NAMES, (1.0,), (HOME,))).state is GoalState.FAILED
+
+
+def test_bring_up_configures_the_bus(arm: WX250s, fake: FakeDxlBus) -> None:
+    assert sorted(arm.found) == list(range(1, 10))
+    for dxl_id in range(1, 10):
+        s = fake.servo(dxl_id)
+        assert s.torque, dxl_id
+        assert s.get("return_delay_time") == 0 and s.get("velocity_limit") == 131
+    assert fake.servo(3).secondary_id == 2 and fake.servo(5).secondary_id == 4
+    assert fake.servo(3).get("drive_mode") == 5 and fake.servo(5).get("drive_mode") == 5
+    assert fake.servo(7).get("drive_mode") == 5 and fake.servo(2).get("drive_mode") == 4
+    assert fake.servo(9).get("operating_mode") == OperatingMode.PWM
+    assert fake.servo(2).get("operating_mode") == OperatingMode.POSITION
+    assert fake.servo(2).get("min_position_limit") == 819 and fake.servo(4).get("max_position_limit") == 3094
+    assert fake.servo(1).get("profile_velocity") == 100 and fake.servo(1).get("profile_acceleration") == 30
+    # held where it was: sleep pose, no jump at torque on
+    assert arm.arm.state().positions == pytest.approx((0.0, -1.80, 1.55, 0.0, 0.8, 0.0), abs=2e-3)
+    assert arm.arm.joint_names == NAMES
+    assert [lim.name for lim in arm.arm.limits] == list(NAMES)
+    assert arm.arm.limits[1].lower == pytest.approx(math.radians(-108), abs=1e-4)
+    assert np.allclose(arm.arm.mount, np.eye(4))
+
+
+def test_trajectory_streams_and_succeeds(arm: WX250s, fake: FakeDxlBus) -> None:
+    q1 = (0.2, -1.2, 1.2, 0.1, 0.6, 0.1)
+    writes0 = fake.goal_writes
+    goal = arm.arm.follow(JointTrajectory(NAMES, (0.3, 0.6), (q1, HOME)))
+    took = wait(goal, 3.0)
+    assert goal.state is GoalState.SUCCEEDED, goal.reason
+    assert 0.55 < took < 0.6 + 1.0
+    assert fake.goal_writes - writes0 >= 40  # streamed every cycle at ~100 Hz, not one set-point
+    assert arm.arm.state().positions == pytest.approx(HOME, abs=0.02)
+    # shadows followed their masters through the Secondary ID
+    assert fake.servo(3).get("goal_position") == fake.servo(2).get("goal_position")
+    assert fake.servo(5).get("goal_position") == fake.servo(4).get("goal_position")
+    assert goal.result.names == NAMES
+
+
+@pytest.mark.parametrize(
+    "point, times, what",
+    [
+        ((0.0, -2.5, 0.5, 0.0, 0.3, 0.0), (2.0,), "shoulder = -2.5000 rad outside its limits"),
+        ((0.0, -0.5, 1.9, 0.0, 0.3, 0.0), (2.0,), "elbow = 1.9000 rad outside"),
+        ((3.0, -0.5, 0.5, 0.0, 0.3, 0.0), (0.5,), "waist would move at 6.000 rad/s, above its limit"),
+    ],
+)
+def test_limits_rejected_before_anything_is_sent(
+    arm: WX250s, fake: FakeDxlBus, point: tuple[float, ...], times: tuple[float, ...], what: str
+) -> None:
+    move_home(arm)
+    time.sleep(0.05)
+    writes0 = fake.goal_writes
+    goal = arm.arm.follow(JointTrajectory(NAMES, times, (point,)))
+    assert goal.state is GoalState.FAILED and what in goal.reason and "nothing was sent" in goal.reason
+    time.sleep(0.1)
+    assert fake.goal_writes == writes0
+    assert arm.arm.state().positions == pytest.approx(HOME, abs=0.02)
+
+
+def test_cancel_holds_position(arm: WX250s, fake: FakeDxlBus) -> None:
+    goal = arm.arm.follow(JointTrajectory(NAMES, (1.5,), ((0.8, -0.5, 0.5, 0.0, 0.3, 0.0),)))
+    time.sleep(0.3)
+    goal.cancel()
+    wait(goal, 0.5)
+    assert goal.state is GoalState.CANCELLED
+    time.sleep(0.25)  # the 100 ms profile settles on the held goal
+    held = arm.arm.state().positions[0]
+    time.sleep(0.2)
+    assert arm.arm.state().positions[0] == pytest.approx(held, abs=1e-3)
+    assert 0.05 < held < 0.7
+    assert pulses_to_rad(fake.servo(1).get("goal_position")) == pytest.approx(held, abs=0.02)
+
+
+@pytest.mark.parametrize("fault", ["overload", "overheating", "input_voltage", "motor_encoder", "electrical_shock"])
+def test_hardware_fault_fails_goal_with_name(arm: WX250s, fake: FakeDxlBus, fault: str) -> None:
+    goal = arm.arm.follow(JointTrajectory(NAMES, (1.5,), ((0.8, -0.5, 0.5, 0.0, 0.3, 0.0),)))
+    time.sleep(0.1)
+    fake.inject_hardware_error(4, fault)
+    took = wait(goal, 0.5)
+    assert goal.state is GoalState.FAILED
+    assert f"servo id 4 (elbow): {fault}" in goal.reason and "reboot" in goal.reason
+    assert took < 0.25  # detected within a few 10 ms cycles (margin for a loaded machine)
+    assert arm.faults == {"elbow": (fault,)}
+    refused = arm.arm.follow(JointTrajectory(NAMES, (1.0,), (HOME,)))
+    assert refused.state is GoalState.FAILED and fault in refused.reason
+
+
+def test_reboot_clears_fault_and_motion_resumes(arm: WX250s, fake: FakeDxlBus) -> None:
+    fake.inject_hardware_error(2, "overload")
+    time.sleep(0.1)
+    assert arm.faults == {"shoulder": ("overload",)}
+    assert not fake.servo(2).torque
+    r = arm.reboot("shoulder")
+    wait(r, 1.0)
+    assert r.state is GoalState.SUCCEEDED and r.result == ("shoulder",)
+    assert arm.faults == {} and fake.servo(2).torque and fake.servo(3).hardware_error == 0
+    move_home(arm)
+
+
+def test_smart_reboot_only_faulted_servos(arm: WX250s, fake: FakeDxlBus) -> None:
+    fake.inject_hardware_error(7, "overheating")
+    time.sleep(0.1)
+    r = arm.smart_reboot()
+    wait(r, 1.0)
+    assert r.state is GoalState.SUCCEEDED and r.result == ("wrist_angle",)
+    assert arm.faults == {}
+    assert arm.reboot("nose").state is GoalState.FAILED
+
+
+def test_missing_servo_at_connect_names_id_and_port(fake: FakeDxlBus) -> None:
+    fake.servo(5).present = False
+    dev = WX250s(cfg(fake.port))
+    with pytest.raises(NoReply, match=rf"{fake.port}: servo id 5 \(elbow_shadow\) did not answer ping \(3 attempts"):
+        dev.connect()
+    assert not dev.bus.is_open
+
+
+def test_faulted_servo_at_connect_is_reported(fake: FakeDxlBus) -> None:
+    fake.inject_hardware_error(6, "motor_encoder")
+    with pytest.raises(HardwareFault, match=r"servo id 6 \(forearm_roll\) .*motor_encoder"):
+        WX250s(cfg(fake.port)).connect()
+
+
+def test_missing_servo_mid_motion_fails_goal(arm: WX250s, fake: FakeDxlBus) -> None:
+    goal = arm.arm.follow(JointTrajectory(NAMES, (1.5,), ((0.8, -0.5, 0.5, 0.0, 0.3, 0.0),)))
+    time.sleep(0.1)
+    fake.servo(6).present = False
+    wait(goal, 1.0)
+    assert goal.state is GoalState.FAILED
+    assert "no reply from servo id 6" in goal.reason and "(forearm_roll) for 3 cycles" in goal.reason
+    assert fake.port in goal.reason
+
+
+def test_unplug_mid_motion(fake: FakeDxlBus) -> None:
+    dev = WX250s(cfg(fake.port))
+    dev.connect()
+    thread = dev._thread
+    goal = dev.arm.follow(JointTrajectory(NAMES, (1.5,), ((0.8, -0.5, 0.5, 0.0, 0.3, 0.0),)))
+    time.sleep(0.1)
+    fake.unplug()
+    wait(goal, 1.0)
+    assert goal.state is GoalState.FAILED and goal.reason.startswith("link lost")
+    assert thread is not None
+    thread.join(1.0)
+    assert not thread.is_alive() and not dev.connected
+    dev.close()
+    assert dev.arm.follow(JointTrajectory(NAMES, (1.0,), (HOME,))).state is GoalState.FAILED
+
+
+@pytest.mark.parametrize("answers", [True, False])
+def test_corrupted_instruction_mid_motion_is_tolerated(arm: WX250s, fake: FakeDxlBus, answers: bool) -> None:
+    fake.crc_error_reply = answers
+    goal = arm.arm.follow(JointTrajectory(NAMES, (0.5,), (HOME,)))
+    time.sleep(0.1)
+    fake.corrupt_instructions = 2  # one cycle's Sync Write and Sync Read arrive garbled
+    wait(goal, 3.0)
+    assert goal.state is GoalState.SUCCEEDED, goal.reason
+
+
+@pytest.mark.parametrize("answers", [True, False])
+def test_corrupted_ping_at_bring_up_is_retried(fake: FakeDxlBus, answers: bool) -> None:
+    fake.crc_error_reply = answers
+    fake.corrupt_instructions = 2
+    dev = WX250s(cfg(fake.port))
+    dev.connect()
+    try:
+        assert sorted(dev.found) == list(range(1, 10))
+    finally:
+        dev.close()
+
+
+def test_gripper_width_geometry() -> None:
+    assert gripper_width(math.pi / 2) == pytest.approx(2 * (0.014 + 0.024))
+    assert gripper_width(0.0) == pytest.approx(2 * math.sqrt(0.024**2 - 0.014**2))
+    for w in (0.030, 0.05, 0.074):
+        assert gripper_width(gripper_angle_for_width(w)) == pytest.approx(w, abs=1e-9)
+
+
+def test_gripper_close_open_and_object(arm: WX250s, fake: FakeDxlBus) -> None:
+    g = arm.gripper.close()
+    wait(g, 2.0)
+    assert g.state is GoalState.SUCCEEDED
+    assert g.result.grasp is GraspState.AT_POSITION and g.result.width == pytest.approx(0.030, abs=0.002)
+    assert fake.servo(9).get("goal_pwm") == 0  # free fingers: not pushing
+    g = arm.gripper.move(0.06)
+    wait(g, 2.0)
+    assert g.result.grasp is GraspState.AT_POSITION and g.result.width == pytest.approx(0.06, abs=0.003)
+    # an object 45 mm wide between the fingers
+    from mmexec.drivers.dynamixel.control_table import rad_to_pulses
+
+    fake.set_obstacle(9, rad_to_pulses(gripper_angle_for_width(0.045)))
+    g = arm.gripper.close(force=5.0)
+    wait(g, 2.0)
+    assert g.result.grasp is GraspState.CONTACT_CLOSING and g.result.holding
+    assert g.result.width == pytest.approx(0.045, abs=0.002)
+    assert fake.servo(9).get("goal_pwm") == -350  # keeps squeezing at the commanded force
+    assert arm.gripper.move(0.2).state is GoalState.FAILED
+
+
+def test_gripper_cancel_stops_pwm(arm: WX250s, fake: FakeDxlBus) -> None:
+    g = arm.gripper.open()
+    time.sleep(0.03)
+    g.cancel()
+    wait(g, 0.5)
+    assert g.state is GoalState.CANCELLED
+    time.sleep(0.02)
+    assert fake.servo(9).get("goal_pwm") == 0
+
+
+def test_locobot_variant(no_leaks: None) -> None:
+    with FakeDxlBus(wx250s_servos(locobot=True)) as fake:
+        dev = WX250s(cfg(fake.port, locobot=True))
+        dev.connect()
+        try:
+            assert sorted(dev.found) == list(range(1, 12))
+            assert np.allclose(dev.arm.mount[:3, 3], (0.097277, 0.0, 0.10795))
+            assert fake.servo(11).get("drive_mode") == 1 and fake.servo(10).get("profile_velocity") == 131
+            assert fake.servo(10).torque
+        finally:
+            dev.close()
+
+
+def test_close_holds_and_leaves_no_threads(fake: FakeDxlBus) -> None:
+    before = threading.active_count()
+    dev = WX250s(cfg(fake.port))
+    dev.connect()
+    assert threading.active_count() == before + 1
+    goal = dev.arm.follow(JointTrajectory(NAMES, (1.5,), ((0.8, -0.5, 0.5, 0.0, 0.3, 0.0),)))
+    time.sleep(0.2)
+    dev.close()
+    assert goal.state is GoalState.CANCELLED
+    assert threading.active_count() == before
+    assert fake.servo(1).torque  # holding, torque on
+    dev.close()  # idempotent
