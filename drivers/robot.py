@@ -302,7 +302,7 @@ def _wx250s(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
         try:
             device.connect()
         except bus_mod.DynamixelError as e:
-            raise _connect_error(path, section.mark, f"wx250s on {cfg.port}: {e}") from e
+            raise _connect_error(path, section.mark, str(e)) from e
         ctx.robot.add_closer(f"wx250s on {cfg.port}", device.close)
         return mod.WX250sArm(device)
 
@@ -355,7 +355,7 @@ def _robotiq(section: YDict, path: str, ctx: _Ctx, *, kind: str) -> _Plan | None
             gripper.setup(activate=act.activate)
         except RobotiqError as e:
             device.close()
-            raise _connect_error(path, section.mark, f"{where}: {e}") from e
+            raise _connect_error(path, section.mark, str(e)) from e
         ctx.robot.add_closer(where, device.close)
         return gripper
 
@@ -375,7 +375,7 @@ def _ur(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
             arm.open()
         except mod.URConnectionError as e:
             arm.close()
-            raise _connect_error(path, section.mark, f"{where}: {e}") from e
+            raise _connect_error(path, section.mark, str(e)) from e
         ctx.robot.add_closer(where, arm.close)
         return arm
 

@@ -86,16 +86,19 @@ def test_close_stops_a_moving_base(tmp_path: Path, fake: KobukiFake) -> None:
 def test_silent_device_is_one_line_error_naming_device_and_port(tmp_path: Path, fake: KobukiFake) -> None:
     fake.silent = True
     cfg = _config(tmp_path, f"  base:\n    kind: kobuki\n    port: {fake.port}\n    connect_timeout: 0.2\n")
-    with pytest.raises(rb.DeviceUnavailable) as ei:
-        build_robot(load_config(cfg))
+    loaded = load_config(cfg)
+    with pytest.raises(rb.DeviceUnavailable) as ei:  # the builder's own type
+        rb.build(loaded.section(), profile={}, seed=None, options={})
+    with pytest.raises(InputError) as ei2:  # as the executive reports it
+        build_robot(loaded)
     msg = str(ei.value)
-    assert "\n" not in msg
+    assert str(ei2.value) == msg and "\n" not in msg
     assert msg == f"{cfg}:5:5: robot.base: kobuki on {fake.port}: no answer within 0.2 s (is the base switched on?)"
 
 
 def test_missing_port_is_one_line_error(tmp_path: Path) -> None:
     cfg = _config(tmp_path, "  base: {kind: kobuki, port: /dev/no-such-kobuki}\n")
-    with pytest.raises(rb.DeviceUnavailable, match=r"run\.yaml:4:9: robot\.base: kobuki on /dev/no-such-kobuki: no such port"):
+    with pytest.raises(InputError, match=r"run\.yaml:4:9: robot\.base: kobuki on /dev/no-such-kobuki: no such port"):
         build_robot(load_config(cfg))
 
 
@@ -221,9 +224,9 @@ def test_gripper_that_does_not_answer_closes_the_base(tmp_path: Path, fake: Kobu
     try:
         cfg = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}}}\n"
                                 f"  gripper: {{kind: robotiq_rtu, port: {grip.port}}}\n")
-        with pytest.raises(rb.DeviceUnavailable) as ei:
+        with pytest.raises(InputError) as ei:
             build_robot(load_config(cfg))
         msg = str(ei.value)
-        assert "\n" not in msg and msg.startswith(f"{cfg}:5:12: robot.gripper: robotiq on {grip.port}: ")
+        assert "\n" not in msg and msg.startswith(f"{cfg}:5:12: robot.gripper: {grip.port}: robotiq: no answer")
     finally:
         grip.stop()
