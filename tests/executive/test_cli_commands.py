@@ -265,3 +265,13 @@ def test_ctrl_c_halts_cancels_and_exits_130(tmp_path: Path) -> None:
     assert recs[-1]["event"] == "run_end" and recs[-1]["outcome"] == "interrupted"
     assert [r["outcome"] for r in recs if r["event"] == "request_end"] == ["interrupted"]
     assert "interrupted" in out
+
+
+def test_show_prints_tree_and_writes_dot(run_cli, repo_root: Path, tmp_path: Path) -> None:
+    dot = tmp_path / "tree.dot"
+    res = run_cli("show", repo_root / "trees" / "demo_mock.yaml", "--dot", dot)
+    assert res.rc == 0, res.err
+    assert res.out.splitlines()[0].endswith("demo_fetch") and "go_to_shelf" in res.out and "pick_item" in res.out
+    assert "digraph" in dot.read_text() and f"wrote {dot}" in res.out
+    res = run_cli("show", repo_root / "trees" / "demo_mock.yaml", "--dot", tmp_path / "no" / "dir" / "x.dot")
+    assert_input_error(res, "x.dot:1:1: cannot write")
