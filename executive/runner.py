@@ -390,7 +390,7 @@ class Runner:
         elif ev == "report":
             self.progress.clear()
             level = record.get("level", "info")
-            print(f"  {'' if level == 'info' else level + ': '}{record.get('message', '')}", file=self.out)
+            self._say(f"  {'' if level == 'info' else level + ': '}{record.get('message', '')}")
             self.out.flush()
 
     def _serve(self, ctx: Any, index: int, total: int, request: dict[str, Any], period: float) -> RequestResult:
@@ -496,19 +496,17 @@ class Runner:
             self._rejected_digest = digest
             lines = [str(p) for p in e.problems]
             self.log.write("mission_reload", ok=False, problems=lines)
-            print(f"mmexec: {self.options.mission} changed but has errors; still running the previous version:",
-                  file=self.err)
+            self._say(f"mmexec: {self.options.mission} changed but has errors; still running the previous version:",
+                      self.err)
             for line in lines:
-                print(line, file=self.err)
-            self.err.flush()
+                self._say(line, self.err)
             return
         self.mission = mission
         self._mission_digest = _file_sha256(self._mission_files())
         self._rejected_digest = ""
         self._requests[next_index:] = remaining
         self.log.write("mission_reload", ok=True, mission_sha256=mission.sha256)
-        print(f"mmexec: reloaded {self.options.mission} (sha256 {mission.sha256[:12]})", file=self.out)
-        self.out.flush()
+        self._say(f"mmexec: reloaded {self.options.mission} (sha256 {mission.sha256[:12]})")
 
     def _validate_with(self, mission: Any, start: int) -> list[dict[str, Any]]:
         reqs = self.options.requests or [Request({}, ArgMark("mmexec run (no --request given)", 0, 0))]
@@ -532,10 +530,14 @@ class Runner:
         line = f"request {r.index}/{total} ({req}): {r.outcome} after {r.duration:.1f} s{rec}"
         if r.reason:
             line += f": {r.reason}" + (f" [{r.failure_node}]" if r.failure_node else "")
-        print(line, file=self.out)
-        self.out.flush()
+        self._say(line)
 
     def _print_summary(self, n: int, ok: int, failed: int, outcome: str) -> None:
         extra = f", {n - ok - failed} not served" if ok + failed < n else ""
-        print(f"{ok}/{n} requests succeeded, {failed} failed{extra} ({outcome}); log: {self.log_path}", file=self.out)
-        self.out.flush()
+        self._say(f"{ok}/{n} requests succeeded, {failed} failed{extra} ({outcome}); log: {self.log_path}")
+
+    def _say(self, line: str, stream: TextIO | None = None) -> None:
+        """Write one line of user-facing output (the run's console, not logging)."""
+        s = stream if stream is not None else self.out
+        s.write(line + "\n")
+        s.flush()
