@@ -228,6 +228,7 @@ class SimArm(Arm):
         self._fail_at: float | None = None
         self._stop: tuple[float, np.ndarray, np.ndarray] | None = None
         self._hold: np.ndarray | None = None
+        self._held_cmd: np.ndarray | None = None
         self.attempts = 0
 
     @property
@@ -328,8 +329,11 @@ class SimArm(Arm):
         if goal is None or goal.done() or self._traj is None:
             if self._hold is None:
                 self._hold = self._q()[0]
-            self._command(self._hold)
+            if self._held_cmd is not self._hold:  # motor targets persist: command once
+                self._command(self._hold)
+                self._held_cmd = self._hold
             return
+        self._held_cmd = None
         t = now - self._t0
         if self._fail_at is not None and now >= self._fail_at:
             q = self._q()[0]
@@ -469,6 +473,8 @@ class SimGripper(Gripper):
 
     def update(self, dt: float) -> None:
         c = self._c
+        if self.held is None and (self._goal is None or self._goal.done()) and self._cmd == self._target:
+            return  # idle: the motor targets set last time persist
         step = self._speed * dt
         self._cmd = self._cmd + max(-step, min(step, self._target - self._cmd))
         qs = c.info.width_to_q(self._cmd if not self.held else self._target)
