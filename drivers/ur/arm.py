@@ -537,6 +537,8 @@ class URArm(Arm):
         rcv = ctl = None
         try:
             rcv = self._call("RTDEReceiveInterface()", self._receive_factory, host, freq, timeout=self.config.connect_timeout)
+            if goal.done():  # open() gave up meanwhile: do not go on connecting
+                raise _Stalled(goal.reason or "gave up", rcv)
             ctl = self._call("RTDEControlInterface()", self._control_factory, host, freq, timeout=self.config.connect_timeout)
         except (RuntimeError, URConnectionError, _Stalled) as e:
             with self._lock:
@@ -588,7 +590,9 @@ class URArm(Arm):
             self._state = JointState(urmodel.JOINT_NAMES, tuple(q), tuple(qd), tuple(cur), now)
             self._tcp_pose = list(tcp)
             self._have_state = True
-            self._status = URStatus(not fault.startswith("connection lost"), int(rmode), int(smode), int(rt), fault, now)
+            # a lost link flips ``connected`` in _lose_link, after the running goal failed
+            connected = self._status.connected if fault.startswith("connection lost") else True
+            self._status = URStatus(connected, int(rmode), int(smode), int(rt), fault, now)
         return fault
 
     def _cycle(self) -> None:
@@ -619,7 +623,7 @@ class URArm(Arm):
             acc = min(self.config.move_acceleration, self.config.acceleration_limit)
             ok = self._call("moveJ", self._ctl.moveJ, [float(x) for x in m.target], m.speed, acc, True)
             if not ok:
-                self._finish(m, fail=f"controller refused moveJ ({self._why_refused()})")
+                self._refused(m, "moveJ")
                 return
         m.phase = "run"
         self._advance(m)
@@ -654,7 +658,7 @@ class URArm(Arm):
             ok = self._call("servoJ", self._ctl.servoJ, [float(x) for x in q_cmd], 0.0, 0.0,
                             1.0 / cfg.frequency, cfg.servo_lookahead, cfg.servo_gain)
             if not ok:
-                self._finish(m, fail=f"controller refused servoJ ({self._why_refused()})")
+                self._refused(m, "servoJ")
                 return
         elif reached:
             self._finish(m)
@@ -687,10 +691,16 @@ class URArm(Arm):
             self._motion = None
         self._unwatch(m.goal)
 
-    def _why_refused(self) -> str:
+    def _refused(self, m: _Motion, what: str) -> None:
+        """The controller said no: read it again so the goal names the actual cause."""
+        fault = self._read()
+        if fault.startswith("connection lost"):
+            self._lose_link(fault)
+            return
         with self._lock:
             st = self._status
-        return st.fault or (f"safety mode {st.safety_mode}, runtime state {st.runtime_state}")
+        self._finish(m, fail=fault or f"controller refused {what} (safety mode {st.safety_mode}, "
+                                      f"runtime state {st.runtime_state})")
 
     def _lose_link(self, reason: str) -> None:
         if self._link_lost:

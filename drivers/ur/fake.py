@@ -186,7 +186,9 @@ class FakeURController:
             self.frozen = on
 
     def release_blocked_calls(self) -> None:
-        """Wake constructors / commands blocked by ``connect_delay`` / ``command_delay``."""
+        """Wake constructors / commands blocked by ``connect_delay`` / ``command_delay``
+        and set both delays to 0 (calls no longer block)."""
+        self.connect_delay = self.command_delay = 0.0
         self._release.set()
 
     # ------------------------------------------------------------------ factories
@@ -265,8 +267,7 @@ class FakeURController:
 
     def _block(self, seconds: float) -> None:
         """Block the calling thread for ``seconds`` of real time (a slow link), releasable."""
-        if seconds > 0:
-            self._release.clear()
+        if seconds > 0 and not self._release.is_set():
             self._release.wait(seconds)
 
     def _connect(self, host: str) -> int:

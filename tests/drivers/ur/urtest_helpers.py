@@ -33,7 +33,11 @@ def wait_for(pred: Callable[[], bool], timeout: float = 2.0) -> bool:
 def sync(arm: URArm, clock: ManualClock) -> None:
     """Wait until the worker has read the controller at the clock's current time."""
     now = clock.now()
-    assert wait_for(lambda: arm.state().stamp >= now or not arm.connected), "worker did not cycle"
+    before = arm.state()
+    # a new read object means a whole worker cycle (commands, then read) ran after this call
+    assert wait_for(lambda: (arm.state() is not before and arm.state().stamp >= now) or not arm.connected), (
+        "worker did not cycle"
+    )
 
 
 def step_until(arm: URArm, clock: ManualClock, goal: Goal, dt: float = 0.02, limit: float = 10.0) -> float:
