@@ -63,8 +63,12 @@ def add_ping_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", required=True, help="serial port of the U2D2, e.g. /dev/ttyDXL")
     parser.add_argument("--baud", type=int, default=1_000_000, help="bit/s (default 1000000)")
     parser.add_argument("--ids", default="1-9", help="ids to ping, e.g. 1-9 or 1,2,4 (default 1-9)")
-    parser.add_argument("--latency-ms", type=float, default=16.0,
-                        help="adapter latency for reply deadlines [ms] (default 16, the FTDI factory timer)")
+    parser.add_argument(
+        "--latency-ms",
+        type=float,
+        default=16.0,
+        help="adapter latency for reply deadlines [ms] (default 16, the FTDI factory timer)",
+    )
     parser.add_argument("--attempts", type=int, default=3, help="ping attempts per id (default 3)")
 
 
@@ -99,7 +103,11 @@ def ping(args: argparse.Namespace) -> int:
             model = MODELS[info.model].name if info.model in MODELS else "unknown model"
             line = f"id {dxl_id}: {model} (model {info.model}), firmware {info.firmware}"
             try:
-                faults = decode_hardware_error(bus.read(dxl_id, 70, 1)[0]) if info.model in MODELS else ()
+                faults = (
+                    decode_hardware_error(bus.read(dxl_id, 70, 1)[0])
+                    if info.model in MODELS
+                    else ()
+                )
             except (NoReply, CorruptReply, ServoError):
                 faults = ()
             if faults:
@@ -117,21 +125,35 @@ def ping(args: argparse.Namespace) -> int:
     finally:
         bus.close()
     if not found:
-        why = "corrupt frames (wrong baud rate or noise?)" if corrupt else "no answer within the deadline"
-        print(f"{DEVICE} {port}: {why} from any of ids {args.ids} at {args.baud} baud", file=sys.stderr)
+        why = (
+            "corrupt frames (wrong baud rate or noise?)"
+            if corrupt
+            else "no answer within the deadline"
+        )
+        print(
+            f"{DEVICE} {port}: {why} from any of ids {args.ids} at {args.baud} baud",
+            file=sys.stderr,
+        )
         return 1
     if missing:
         extra = f" (corrupt frames from {', '.join(map(str, corrupt))})" if corrupt else ""
-        print(f"{DEVICE} {port}: no answer within the deadline from ids {', '.join(map(str, missing))}{extra}",
-              file=sys.stderr)
+        print(
+            f"{DEVICE} {port}: no answer within the deadline from ids {', '.join(map(str, missing))}{extra}",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
 
 def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--locobot", action="store_true", help="LoCoBot variant: add pan (10) and tilt (11)")
-    parser.add_argument("--configured", action="store_true",
-                        help="start with the Interbotix EEPROM settings already applied")
+    parser.add_argument(
+        "--locobot", action="store_true", help="LoCoBot variant: add pan (10) and tilt (11)"
+    )
+    parser.add_argument(
+        "--configured",
+        action="store_true",
+        help="start with the Interbotix EEPROM settings already applied",
+    )
 
 
 def run_fake(args: argparse.Namespace) -> int:

@@ -24,9 +24,10 @@ import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Self
 
 from mmexec.drivers.dynamixel import codec
-from mmexec.drivers.dynamixel.codec import BROADCAST_ID, BadFrame, Instruction, Status, StatusResult
+from mmexec.drivers.dynamixel.codec import BROADCAST_ID, BadFrame, Status, StatusResult
 from mmexec.drivers.dynamixel.control_table import decode_hardware_error
 from mmexec.drivers.transport import LinkClosed, LinkError, SerialSettings, SerialTransport
 
@@ -111,7 +112,9 @@ class HardwareFault(DynamixelError):
     def __init__(self, port: str, dxl_id: int, faults: Sequence[str], joint: str = "") -> None:
         who = f"servo id {dxl_id}" + (f" ({joint})" if joint else "")
         names = ", ".join(faults) or "unknown"
-        super().__init__(f"{who} on {port}: hardware fault: {names} (torque is off; reboot the servo)")
+        super().__init__(
+            f"{who} on {port}: hardware fault: {names} (torque is off; reboot the servo)"
+        )
         self.port = port
         self.id = dxl_id
         self.faults = tuple(faults)
@@ -235,7 +238,7 @@ class DxlBus:
         with self._lock:
             self._link.close()
 
-    def __enter__(self) -> DxlBus:
+    def __enter__(self) -> Self:
         self.open()
         return self
 
@@ -247,7 +250,9 @@ class DxlBus:
         return self._byte_time * (tx_len + rx_len) + 2.0 * self.config.latency + 0.002
 
     # -- core transaction
-    def transact(self, packet: bytes, expected: Sequence[tuple[int, int]] = ()) -> dict[int, Status]:
+    def transact(
+        self, packet: bytes, expected: Sequence[tuple[int, int]] = ()
+    ) -> dict[int, Status]:
         """Write ``packet``; collect one status per ``(id, data_length)`` in ``expected``.
 
         Returns ``{id: Status}``. Raises :class:`NoReply`, :class:`CorruptReply` or
@@ -289,7 +294,9 @@ class DxlBus:
                             corrupt_ids.append(item.id)
                             continue
                         if not item.is_status or item.id not in want or item.id in got:
-                            self.stats.extra["unexpected"] = self.stats.extra.get("unexpected", 0) + 1
+                            self.stats.extra["unexpected"] = (
+                                self.stats.extra.get("unexpected", 0) + 1
+                            )
                             continue
                         if not item.params:
                             corrupt_ids.append(item.id)
@@ -308,7 +315,9 @@ class DxlBus:
                 err = CorruptReply(port, f"corrupt reply (CRC mismatch) from servo id {bad}", bad)
             elif parser.pending:
                 err = TruncatedReply(
-                    port, f"truncated reply from servo id {first} ({parser.pending} bytes, then silence)", first
+                    port,
+                    f"truncated reply from servo id {first} ({parser.pending} bytes, then silence)",
+                    first,
                 )
             else:
                 self.stats.timeouts += 1
@@ -335,7 +344,9 @@ class DxlBus:
         if not st.ok:
             raise ServoError(self.config.port, dxl_id, st.result, "ping")
         if len(st.data) < 3:
-            raise CorruptReply(self.config.port, f"ping reply from servo id {dxl_id} too short", dxl_id)
+            raise CorruptReply(
+                self.config.port, f"ping reply from servo id {dxl_id} too short", dxl_id
+            )
         return PingInfo(dxl_id, st.data[0] | (st.data[1] << 8), st.data[2])
 
     def broadcast_ping(self, max_ids: int = 253) -> list[PingInfo]:
@@ -353,19 +364,33 @@ class DxlBus:
                 deadline = time.monotonic() + self.reply_timeout(len(pkt), 14 * max_ids)
                 while (remaining := deadline - time.monotonic()) > 0:
                     for item in self._parser.feed(link.wait_readable(remaining)):
-                        if isinstance(item, codec.Packet) and item.is_status and len(item.params) >= 4:
-                            found.append(PingInfo(item.id, item.params[1] | (item.params[2] << 8), item.params[3]))
+                        if (
+                            isinstance(item, codec.Packet)
+                            and item.is_status
+                            and len(item.params) >= 4
+                        ):
+                            found.append(
+                                PingInfo(
+                                    item.id, item.params[1] | (item.params[2] << 8), item.params[3]
+                                )
+                            )
             except LinkError as e:
                 raise LinkLost(self.config.port, f"link lost: {e.detail}") from e
         return sorted(found, key=lambda p: p.id)
 
     def read(self, dxl_id: int, address: int, length: int) -> bytes:
         """Read ``length`` bytes at ``address``; :class:`ServoError` on an error result."""
-        st = self._one(codec.read(dxl_id, address, length), dxl_id, length, f"read {length} bytes at {address}")
+        st = self._one(
+            codec.read(dxl_id, address, length), dxl_id, length, f"read {length} bytes at {address}"
+        )
         if st is None:
             raise ValueError("a Read to the broadcast id gets no reply")
         if len(st.data) != length:
-            raise CorruptReply(self.config.port, f"servo id {dxl_id} returned {len(st.data)} of {length} bytes", dxl_id)
+            raise CorruptReply(
+                self.config.port,
+                f"servo id {dxl_id} returned {len(st.data)} of {length} bytes",
+                dxl_id,
+            )
         return st.data
 
     def read_status(self, dxl_id: int, address: int, length: int) -> Status:
@@ -397,7 +422,9 @@ class DxlBus:
     def clear_multi_turn(self, dxl_id: int) -> None:
         self._one(codec.clear_multi_turn(dxl_id), dxl_id, 0, "clear")
 
-    def sync_write(self, address: int, length: int, data: Mapping[int, bytes] | Iterable[tuple[int, bytes]]) -> None:
+    def sync_write(
+        self, address: int, length: int, data: Mapping[int, bytes] | Iterable[tuple[int, bytes]]
+    ) -> None:
         """Sync Write (no reply)."""
         self.transact(codec.sync_write(address, length, data))
 
@@ -414,4 +441,3 @@ class DxlBus:
     def hardware_error(self, dxl_id: int) -> tuple[str, ...]:
         """Named faults in a servo's Hardware Error Status (address 70)."""
         return decode_hardware_error(self.read(dxl_id, 70, 1)[0])
-

@@ -26,14 +26,14 @@ from dataclasses import dataclass
 
 __all__ = [
     "BROADCAST_ID",
+    "HEADER",
+    "MAX_ID",
+    "STATUS_INSTRUCTION",
     "BadFrame",
     "CodecError",
-    "HEADER",
     "Instruction",
-    "MAX_ID",
     "Packet",
     "PacketParser",
-    "STATUS_INSTRUCTION",
     "Status",
     "StatusResult",
     "action",
@@ -381,7 +381,9 @@ def ping(dxl_id: int) -> bytes:
 
 def read(dxl_id: int, address: int, length: int) -> bytes:
     """Read ``length`` bytes from control-table ``address``."""
-    return encode_instruction(dxl_id, Instruction.READ, _u16(address, "address") + _u16(length, "length"))
+    return encode_instruction(
+        dxl_id, Instruction.READ, _u16(address, "address") + _u16(length, "length")
+    )
 
 
 def write(dxl_id: int, address: int, data: bytes) -> bytes:
@@ -427,11 +429,15 @@ def sync_read(address: int, length: int, ids: Sequence[int]) -> bytes:
     for i in ids:
         _check_id(i, broadcast_ok=False)
     return encode_instruction(
-        BROADCAST_ID, Instruction.SYNC_READ, _u16(address, "address") + _u16(length, "length") + bytes(ids)
+        BROADCAST_ID,
+        Instruction.SYNC_READ,
+        _u16(address, "address") + _u16(length, "length") + bytes(ids),
     )
 
 
-def sync_write(address: int, length: int, data: Mapping[int, bytes] | Iterable[tuple[int, bytes]]) -> bytes:
+def sync_write(
+    address: int, length: int, data: Mapping[int, bytes] | Iterable[tuple[int, bytes]]
+) -> bytes:
     """Sync Write the same ``length``-byte item at ``address`` to several servos (no reply)."""
     items = list(data.items()) if isinstance(data, Mapping) else list(data)
     if not items:
@@ -490,7 +496,11 @@ def parse_sync_write(params: bytes) -> tuple[int, int, dict[int, bytes]]:
     step = 1 + length
     if length == 0 or len(rest) % step:
         raise CodecError(f"sync write body of {len(rest)} bytes is not a multiple of {step}")
-    return address, length, {rest[i]: bytes(rest[i + 1 : i + step]) for i in range(0, len(rest), step)}
+    return (
+        address,
+        length,
+        {rest[i]: bytes(rest[i + 1 : i + step]) for i in range(0, len(rest), step)},
+    )
 
 
 def parse_bulk_read(params: bytes) -> list[tuple[int, int, int]]:

@@ -18,10 +18,10 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 __all__ = [
-    "Access",
-    "Area",
     "HARDWARE_ERROR_BITS",
     "MODELS",
+    "Access",
+    "Area",
     "Model",
     "OperatingMode",
     "Register",
@@ -30,8 +30,8 @@ __all__ = [
     "load_to_fraction",
     "model_by_number",
     "pulses_to_rad",
-    "rad_to_pulses",
     "rad_s_to_velocity",
+    "rad_to_pulses",
     "velocity_to_rad_s",
 ]
 
@@ -85,13 +85,27 @@ class Register:
         return self.access is Access.RW
 
 
-def _r(name: str, address: int, size: int, access: str, area: str, unit: str = "", default: int = 0,
-       signed: bool = False) -> Register:
+def _r(
+    name: str,
+    address: int,
+    size: int,
+    access: str,
+    area: str,
+    unit: str = "",
+    default: int = 0,
+    signed: bool = False,
+) -> Register:
     return Register(name, address, size, Access(access), Area(area), unit, default, signed)
 
 
-def _x_series(*, model_number: int, current_limit: int | None, temperature_limit: int,
-              max_voltage: int, min_voltage: int) -> tuple[Register, ...]:
+def _x_series(
+    *,
+    model_number: int,
+    current_limit: int | None,
+    temperature_limit: int,
+    max_voltage: int,
+    min_voltage: int,
+) -> tuple[Register, ...]:
     regs = [
         _r("model_number", 0, 2, "R", "EEPROM", "", model_number),
         _r("model_information", 2, 4, "R", "EEPROM"),
@@ -180,7 +194,11 @@ class Model:
 
     def covering(self, address: int, length: int) -> list[Register]:
         """Registers overlapping ``[address, address + length)``."""
-        return [r for r in self.registers if r.address < address + length and address < r.address + r.size]
+        return [
+            r
+            for r in self.registers
+            if r.address < address + length and address < r.address + r.size
+        ]
 
     @property
     def has_current_sensor(self) -> bool:
@@ -188,13 +206,30 @@ class Model:
 
 
 _ALL_MODES = frozenset(int(m) for m in OperatingMode)
-XM430_W350 = Model(1020, "XM430-W350", _x_series(model_number=1020, current_limit=1193, temperature_limit=80,
-                                                  max_voltage=160, min_voltage=95), _ALL_MODES)
-XM540_W270 = Model(1120, "XM540-W270", _x_series(model_number=1120, current_limit=2047, temperature_limit=80,
-                                                  max_voltage=160, min_voltage=95), _ALL_MODES)
-XL430_W250 = Model(1060, "XL430-W250", _x_series(model_number=1060, current_limit=None, temperature_limit=72,
-                                                  max_voltage=140, min_voltage=60),
-                   _ALL_MODES - {OperatingMode.CURRENT, OperatingMode.CURRENT_BASED_POSITION})
+XM430_W350 = Model(
+    1020,
+    "XM430-W350",
+    _x_series(
+        model_number=1020, current_limit=1193, temperature_limit=80, max_voltage=160, min_voltage=95
+    ),
+    _ALL_MODES,
+)
+XM540_W270 = Model(
+    1120,
+    "XM540-W270",
+    _x_series(
+        model_number=1120, current_limit=2047, temperature_limit=80, max_voltage=160, min_voltage=95
+    ),
+    _ALL_MODES,
+)
+XL430_W250 = Model(
+    1060,
+    "XL430-W250",
+    _x_series(
+        model_number=1060, current_limit=None, temperature_limit=72, max_voltage=140, min_voltage=60
+    ),
+    _ALL_MODES - {OperatingMode.CURRENT, OperatingMode.CURRENT_BASED_POSITION},
+)
 
 MODELS: dict[int, Model] = {m.number: m for m in (XM430_W350, XM540_W270, XL430_W250)}
 
@@ -243,24 +278,24 @@ def encode_hardware_error(names: Iterable[str]) -> int:
 # --------------------------------------------------------------------------- unit conversions
 
 
-def pulses_to_rad(pulses: int | float) -> float:
+def pulses_to_rad(pulses: float) -> float:
     """Position register [pulses] to joint angle [rad] with 2048 pulses = 0 rad."""
     return (pulses - CENTER_PULSES) * RAD_PER_PULSE
 
 
 def rad_to_pulses(rad: float) -> int:
     """Joint angle [rad] to the nearest position register value [pulses]."""
-    return int(round(rad / RAD_PER_PULSE)) + CENTER_PULSES
+    return round(rad / RAD_PER_PULSE) + CENTER_PULSES
 
 
-def velocity_to_rad_s(units: int | float) -> float:
+def velocity_to_rad_s(units: float) -> float:
     """Velocity register [0.229 rpm units] to [rad/s]."""
     return units * RAD_S_PER_VELOCITY_UNIT
 
 
 def rad_s_to_velocity(rad_s: float) -> int:
     """[rad/s] to velocity register units (0.229 rpm), rounded."""
-    return int(round(rad_s / RAD_S_PER_VELOCITY_UNIT))
+    return round(rad_s / RAD_S_PER_VELOCITY_UNIT)
 
 
 def current_to_amps(units: int) -> float:

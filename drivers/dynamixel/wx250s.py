@@ -36,9 +36,9 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Self
 
 import numpy as np
-
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,
@@ -69,9 +69,9 @@ from mmexec.drivers.dynamixel.control_table import (
 from mmexec.drivers.interfaces import (
     Arm,
     Clock,
-    GraspState,
     Goal,
     GoalState,
+    GraspState,
     Gripper,
     GripperState,
     JointLimit,
@@ -81,11 +81,11 @@ from mmexec.drivers.interfaces import (
 
 __all__ = [
     "ARM_JOINTS",
-    "CycleIO",
     "GRIPPER",
-    "JointSpec",
     "LOCOBOT_MOUNT",
     "PAN_TILT",
+    "CycleIO",
+    "JointSpec",
     "ServoReading",
     "WX250s",
     "WX250sArm",
@@ -135,7 +135,9 @@ ARM_JOINTS: tuple[JointSpec, ...] = (
     JointSpec("shoulder", 2, XM430_W350, 819, 3345, -1.88496, 1.98968, effort=20.0, shadow=3),
     JointSpec("elbow", 4, XM430_W350, 648, 3094, -2.14675, 1.60570, effort=15.0, shadow=5),
     JointSpec("forearm_roll", 6, XM430_W350, 0, 4095, -_PI, _PI, effort=2.0),
-    JointSpec("wrist_angle", 7, XM430_W350, 910, 3447, -1.74533, 2.14675, effort=5.0, reversed=True),
+    JointSpec(
+        "wrist_angle", 7, XM430_W350, 910, 3447, -1.74533, 2.14675, effort=5.0, reversed=True
+    ),
     JointSpec("wrist_rotate", 8, XL430_W250, 0, 4095, -_PI, _PI, effort=1.0),
 )
 GRIPPER = JointSpec("gripper", 9, XL430_W250, 0, 4095, -math.pi, math.pi, effort=1.0)
@@ -148,10 +150,10 @@ LOCOBOT_MOUNT = (0.097277, 0.0, 0.10795)
 
 # --------------------------------------------------------------------------- gripper geometry
 
-HORN_RADIUS = 0.014   # m
-ARM_LENGTH = 0.024    # m
-FINGER_MIN = 0.015    # m, one finger's travel from the centre
-FINGER_MAX = 0.037    # m
+HORN_RADIUS = 0.014  # m
+ARM_LENGTH = 0.024  # m
+FINGER_MIN = 0.015  # m, one finger's travel from the centre
+FINGER_MAX = 0.037  # m
 
 
 def finger_offset(angle: float) -> float:
@@ -170,7 +172,9 @@ def gripper_angle_for_width(width: float) -> float:
     [-pi/2, pi/2], where it is monotonic); raises ValueError outside its range."""
     lo, hi = -math.pi / 2, math.pi / 2
     if not gripper_width(lo) <= width <= gripper_width(hi):
-        raise ValueError(f"gripper width {width:.4f} m outside {gripper_width(lo):.4f}..{gripper_width(hi):.4f}")
+        raise ValueError(
+            f"gripper width {width:.4f} m outside {gripper_width(lo):.4f}..{gripper_width(hi):.4f}"
+        )
     for _ in range(60):
         mid = 0.5 * (lo + hi)
         if gripper_width(mid) < width:
@@ -202,8 +206,13 @@ class CycleIO:
     bytes at 126 from ``read_ids``. Pure composition of codec + bus, shared by the arm's I/O
     thread and the benchmark."""
 
-    def __init__(self, bus: DxlBus, write_ids: Sequence[int], read_ids: Sequence[int],
-                 models: dict[int, Model]) -> None:
+    def __init__(
+        self,
+        bus: DxlBus,
+        write_ids: Sequence[int],
+        read_ids: Sequence[int],
+        models: dict[int, Model],
+    ) -> None:
         self.bus = bus
         self.write_ids = tuple(write_ids)
         self.read_ids = tuple(read_ids)
@@ -213,7 +222,9 @@ class CycleIO:
         """One Sync Write of Goal Position [pulses], in ``write_ids`` order."""
         if len(pulses) != len(self.write_ids):
             raise ValueError(f"expected {len(self.write_ids)} goals, got {len(pulses)}")
-        self.bus.sync_write(GOAL_POSITION, 4, [(i, codec.int_to_le(p, 4)) for i, p in zip(self.write_ids, pulses)])
+        self.bus.sync_write(
+            GOAL_POSITION, 4, [(i, codec.int_to_le(p, 4)) for i, p in zip(self.write_ids, pulses)]
+        )
 
     def read_state(self) -> dict[int, ServoReading]:
         """One Sync Read of present current/load, velocity and position."""
@@ -228,7 +239,9 @@ class CycleIO:
         vel = int.from_bytes(d[2:6], "little", signed=True)
         pos = int.from_bytes(d[6:10], "little", signed=True)
         effort = current_to_amps(eff) if self._has_current[dxl_id] else load_to_fraction(eff)
-        return ServoReading(pulses_to_rad(pos), velocity_to_rad_s(vel), effort, st.error, pos, vel, eff)
+        return ServoReading(
+            pulses_to_rad(pos), velocity_to_rad_s(vel), effort, st.error, pos, vel, eff
+        )
 
     def cycle(self, pulses: Sequence[int]) -> dict[int, ServoReading]:
         self.write_goals(pulses)
@@ -277,8 +290,13 @@ class WX250sConfig:
             raise ValueError(f"rate_hz must be in (0, 1000], got {self.rate_hz}")
         if self.ping_attempts < 1:
             raise ValueError("ping_attempts must be >= 1")
-        if not 0 <= self.profile_acceleration_ms * 2 <= max(self.profile_velocity_ms, 0) or self.profile_velocity_ms < 0:
-            raise ValueError("time-based profile needs 0 <= 2 * profile_acceleration_ms <= profile_velocity_ms")
+        if (
+            not 0 <= self.profile_acceleration_ms * 2 <= max(self.profile_velocity_ms, 0)
+            or self.profile_velocity_ms < 0
+        ):
+            raise ValueError(
+                "time-based profile needs 0 <= 2 * profile_acceleration_ms <= profile_velocity_ms"
+            )
 
 
 def _detail(e: Exception | None) -> str:
@@ -318,13 +336,23 @@ class _GripRun:
 class WX250s:
     """The arm bus device. Use :attr:`arm` and :attr:`gripper` as capabilities."""
 
-    def __init__(self, config: WX250sConfig, *, clock: Clock | None = None, bus: DxlBus | None = None) -> None:
+    def __init__(
+        self, config: WX250sConfig, *, clock: Clock | None = None, bus: DxlBus | None = None
+    ) -> None:
         self.config = config
         self.clock: Clock = clock if clock is not None else _MonotonicClock()
-        self.bus = bus if bus is not None else DxlBus(BusConfig(config.port, config.baudrate, config.latency))
+        self.bus = (
+            bus
+            if bus is not None
+            else DxlBus(BusConfig(config.port, config.baudrate, config.latency))
+        )
         self.joints: tuple[JointSpec, ...] = ARM_JOINTS
-        self.position_joints: tuple[JointSpec, ...] = ARM_JOINTS + (PAN_TILT if config.locobot else ())
-        self.all_joints: tuple[JointSpec, ...] = ARM_JOINTS + (GRIPPER,) + (PAN_TILT if config.locobot else ())
+        self.position_joints: tuple[JointSpec, ...] = ARM_JOINTS + (
+            PAN_TILT if config.locobot else ()
+        )
+        self.all_joints: tuple[JointSpec, ...] = (
+            ARM_JOINTS + (GRIPPER,) + (PAN_TILT if config.locobot else ())
+        )
         self.read_ids = tuple(j.id for j in self.all_joints)
         self.by_id = {j.id: j for j in self.all_joints}
         self.name_of = {j.id: j.name for j in self.all_joints}
@@ -407,7 +435,9 @@ class WX250s:
         self._stop.clear()
         self._link_error = ""
         self._connected = True
-        self._thread = threading.Thread(target=self._run, name=f"wx250s-{self.bus.port}", daemon=True)
+        self._thread = threading.Thread(
+            target=self._run, name=f"wx250s-{self.bus.port}", daemon=True
+        )
         self._thread.start()
 
     def _bring_up(self) -> None:
@@ -428,21 +458,31 @@ class WX250s:
                         raise
                     last = e
             if dxl_id not in self.found:
-                raise NoReply(bus.port, f"servo id {dxl_id} ({self.name_of[dxl_id]}) did not answer ping "
-                                        f"({cfg.ping_attempts} attempts; last: {_detail(last)})", dxl_id)
+                raise NoReply(
+                    bus.port,
+                    f"servo id {dxl_id} ({self.name_of[dxl_id]}) did not answer ping "
+                    f"({cfg.ping_attempts} attempts; last: {_detail(last)})",
+                    dxl_id,
+                )
             want = self._model_of(dxl_id)
             got = self.found[dxl_id].model
             if got != want.number:
                 name = MODELS[got].name if got in MODELS else "unknown model"
-                raise DynamixelError(f"{bus.port}: servo id {dxl_id} ({self.name_of[dxl_id]}) is {name} ({got}), "
-                                     f"expected {want.name} ({want.number})")
+                raise DynamixelError(
+                    f"{bus.port}: servo id {dxl_id} ({self.name_of[dxl_id]}) is {name} ({got}), "
+                    f"expected {want.name} ({want.number})"
+                )
         ids = self.servo_ids()
         for dxl_id in ids:
             bus.write(dxl_id, TORQUE_ENABLE, b"\x00")
         for dxl_id in ids:
             if bus.read(dxl_id, HW_ERROR, 1)[0]:
-                raise HardwareFault(bus.port, dxl_id, decode_hardware_error(bus.read(dxl_id, HW_ERROR, 1)[0]),
-                                    self.name_of[dxl_id])
+                raise HardwareFault(
+                    bus.port,
+                    dxl_id,
+                    decode_hardware_error(bus.read(dxl_id, HW_ERROR, 1)[0]),
+                    self.name_of[dxl_id],
+                )
         for j in self.all_joints:
             arm_group = j in ARM_JOINTS
             mode = OperatingMode.PWM if j is GRIPPER else OperatingMode.POSITION
@@ -452,14 +492,14 @@ class WX250s:
                 targets.append((j.shadow, drive | 0x01, j.id))
             for dxl_id, dmode, secondary in targets:
                 if cfg.write_eeprom:
-                    bus.write(dxl_id, 9, b"\x00")                              # Return Delay Time 0
-                    bus.write(dxl_id, 10, bytes((dmode,)))                     # Drive Mode
-                    bus.write(dxl_id, 12, bytes((secondary,)))                 # Secondary ID
-                    bus.write(dxl_id, 44, codec.int_to_le(131, 4))             # Velocity Limit 30 rpm
-                    bus.write(dxl_id, 48, codec.int_to_le(j.max_pulses, 4))    # Max Position Limit
-                    bus.write(dxl_id, 52, codec.int_to_le(j.min_pulses, 4))    # Min Position Limit
-                    bus.write(dxl_id, 63, bytes((cfg.shutdown_mask,)))         # Shutdown
-                bus.write(dxl_id, 11, bytes((int(mode),)))                    # Operating Mode
+                    bus.write(dxl_id, 9, b"\x00")  # Return Delay Time 0
+                    bus.write(dxl_id, 10, bytes((dmode,)))  # Drive Mode
+                    bus.write(dxl_id, 12, bytes((secondary,)))  # Secondary ID
+                    bus.write(dxl_id, 44, codec.int_to_le(131, 4))  # Velocity Limit 30 rpm
+                    bus.write(dxl_id, 48, codec.int_to_le(j.max_pulses, 4))  # Max Position Limit
+                    bus.write(dxl_id, 52, codec.int_to_le(j.min_pulses, 4))  # Min Position Limit
+                    bus.write(dxl_id, 63, bytes((cfg.shutdown_mask,)))  # Shutdown
+                bus.write(dxl_id, 11, bytes((int(mode),)))  # Operating Mode
                 if j is GRIPPER:
                     bus.write(dxl_id, GOAL_PWM, codec.int_to_le(0, 2))
                 elif arm_group:
@@ -484,8 +524,12 @@ class WX250s:
             self._grip_pwm = 0
             self._faults = {}
             self._update_state(readings)
-        log.info("%s: wx250s%s up: %s", bus.port, " (LoCoBot)" if cfg.locobot else "",
-                 ", ".join(f"{i}:{MODELS[p.model].name}" for i, p in sorted(self.found.items())))
+        log.info(
+            "%s: wx250s%s up: %s",
+            bus.port,
+            " (LoCoBot)" if cfg.locobot else "",
+            ", ".join(f"{i}:{MODELS[p.model].name}" for i, p in sorted(self.found.items())),
+        )
 
     # -- shutdown
     def close(self) -> None:
@@ -509,7 +553,7 @@ class WX250s:
         self._connected = False
         self.bus.close()
 
-    def __enter__(self) -> WX250s:
+    def __enter__(self) -> Self:
         self.connect()
         return self
 
@@ -520,15 +564,21 @@ class WX250s:
     def _require(self) -> None:
         if not self._connected:
             why = f" ({self._link_error})" if self._link_error else ""
-            raise NotConnected(f"{self.bus.port}: wx250s is not connected{why} (call connect() first)")
+            raise NotConnected(
+                f"{self.bus.port}: wx250s is not connected{why} (call connect() first)"
+            )
 
     def follow(self, trajectory: JointTrajectory) -> Goal:
         """Validate and start streaming ``trajectory`` (arm joints); never blocks."""
         names = tuple(j.name for j in self.joints)
         if not self._connected:
-            return Goal.failed("follow", f"{self.bus.port}: wx250s is not connected (call connect() first)")
+            return Goal.failed(
+                "follow", f"{self.bus.port}: wx250s is not connected (call connect() first)"
+            )
         if set(trajectory.joint_names) != set(names) or len(trajectory.joint_names) != len(names):
-            return Goal.failed("follow", f"trajectory joints {trajectory.joint_names} do not match {names}")
+            return Goal.failed(
+                "follow", f"trajectory joints {trajectory.joint_names} do not match {names}"
+            )
         order = [trajectory.joint_names.index(n) for n in names]
         points = [tuple(float(p[k]) for k in order) for p in trajectory.positions]
         traj = JointTrajectory(names, trajectory.times, tuple(points))
@@ -566,7 +616,9 @@ class WX250s:
         """Drive the gripper toward ``width`` [m] in PWM mode with a PWM set from ``force`` [N]."""
         cfg = self.config
         if not self._connected:
-            return Goal.failed("gripper", f"{self.bus.port}: wx250s is not connected (call connect() first)")
+            return Goal.failed(
+                "gripper", f"{self.bus.port}: wx250s is not connected (call connect() first)"
+            )
         lo, hi = 2 * FINGER_MIN, 2 * FINGER_MAX
         if not lo - 1e-9 <= width <= hi + 1e-9:
             return Goal.failed("gripper", f"width {width:.4f} m outside {lo:.3f}..{hi:.3f} m")
@@ -578,7 +630,7 @@ class WX250s:
             return Goal.failed("gripper", "no gripper state yet")
         target = gripper_angle_for_width(min(max(width, lo), hi))
         frac = min(max(force, 0.0) / cfg.gripper_max_force, 1.0)
-        mag = int(round(cfg.gripper_pwm_min + frac * (cfg.gripper_pwm_max - cfg.gripper_pwm_min)))
+        mag = round(cfg.gripper_pwm_min + frac * (cfg.gripper_pwm_max - cfg.gripper_pwm_min))
         closing = target < reading.position
         goal = Goal("wx250s.gripper", on_cancel=self._on_cancel)
         with self._lock:
@@ -592,7 +644,10 @@ class WX250s:
         """Reboot one joint's servo (its shadow follows), then restore goal and torque."""
         ids = [i for i, n in self.name_of.items() if n == joint]
         if not ids:
-            return Goal.failed("reboot", f"unknown joint {joint!r} (known: {', '.join(sorted(set(self.name_of.values())))})")
+            return Goal.failed(
+                "reboot",
+                f"unknown joint {joint!r} (known: {', '.join(sorted(set(self.name_of.values())))})",
+            )
         return self._reboot_goal(ids)
 
     def smart_reboot(self) -> Goal:
@@ -657,9 +712,17 @@ class WX250s:
             fault = ", ".join(self._faults.get(GRIPPER.id, ()))
         if r is None:
             raise NotConnected(f"{self.bus.port}: no gripper state yet (call connect() first)")
-        grasp = GraspState.MOVING if run is not None else (last.grasp if last else GraspState.AT_POSITION)
-        return GripperState(gripper_width(max(-math.pi / 2, min(math.pi / 2, r.position))), grasp, self.clock.now(),
-                            fault)
+        grasp = (
+            GraspState.MOVING
+            if run is not None
+            else (last.grasp if last else GraspState.AT_POSITION)
+        )
+        return GripperState(
+            gripper_width(max(-math.pi / 2, min(math.pi / 2, r.position))),
+            grasp,
+            self.clock.now(),
+            fault,
+        )
 
     def _update_state(self, readings: dict[int, ServoReading]) -> None:
         self._readings.update(readings)
@@ -674,8 +737,15 @@ class WX250s:
             )
 
     def _fault_text(self) -> str:
-        parts = [f"servo id {i} ({self.name_of.get(i, i)}): {', '.join(f)}" for i, f in sorted(self._faults.items())]
-        return f"hardware fault on {self.bus.port}: " + "; ".join(parts) + " (call reboot(joint) or smart_reboot())"
+        parts = [
+            f"servo id {i} ({self.name_of.get(i, i)}): {', '.join(f)}"
+            for i, f in sorted(self._faults.items())
+        ]
+        return (
+            f"hardware fault on {self.bus.port}: "
+            + "; ".join(parts)
+            + " (call reboot(joint) or smart_reboot())"
+        )
 
     # -- I/O thread
     def _run(self) -> None:
@@ -696,7 +766,7 @@ class WX250s:
             log.error("%s", self._link_error)
             self._finish_goals(self._link_error)
             self._connected = False
-        except Exception as e:  # noqa: BLE001 - must not die silently: fail goals with the cause
+        except Exception as e:
             self._link_error = f"driver error: {e}"
             log.exception("%s: I/O thread failed", self.bus.port)
             self._finish_goals(self._link_error)
@@ -809,7 +879,9 @@ class WX250s:
             q = [x0 + a * (x1 - x0) for x0, x1 in zip(run.q0, traj.positions[0])]
         else:
             q = list(traj.sample(t))
-        pulses = [min(max(rad_to_pulses(x), j.min_pulses), j.max_pulses) for x, j in zip(q, self.joints)]
+        pulses = [
+            min(max(rad_to_pulses(x), j.min_pulses), j.max_pulses) for x, j in zip(q, self.joints)
+        ]
         with self._lock:
             self._goals_pulses[: len(pulses)] = pulses
 
@@ -832,8 +904,10 @@ class WX250s:
             with self._lock:
                 self._traj = None
             self._hold_present()
-            run.goal.fail(f"did not reach the last waypoint within {self.config.settle_timeout:.2f} s: "
-                          f"{self.joints[worst].name} off by {errs[worst]:.3f} rad")
+            run.goal.fail(
+                f"did not reach the last waypoint within {self.config.settle_timeout:.2f} s: "
+                f"{self.joints[worst].name} off by {errs[worst]:.3f} rad"
+            )
 
     def _advance_gripper_pwm(self) -> None:
         with self._lock:
@@ -862,7 +936,9 @@ class WX250s:
         if run is None or r is None or not run.sent or run.goal.state is not GoalState.ACTIVE:
             return
         run.cycles += 1
-        reached = (r.position <= run.target_angle) if run.closing else (r.position >= run.target_angle)
+        reached = (
+            (r.position <= run.target_angle) if run.closing else (r.position >= run.target_angle)
+        )
         width = gripper_width(max(-math.pi / 2, min(math.pi / 2, r.position)))
         near = abs(width - gripper_width(run.target_angle)) <= cfg.gripper_width_tolerance
         run.still = run.still + 1 if abs(r.velocity) < 0.03 else 0
@@ -880,7 +956,9 @@ class WX250s:
                     self._grip = None
                 self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
                 self._grip_pwm = 0
-                run.goal.fail(f"gripper did not stop within {cfg.gripper_timeout:.1f} s (width {width:.4f} m)")
+                run.goal.fail(
+                    f"gripper did not stop within {cfg.gripper_timeout:.1f} s (width {width:.4f} m)"
+                )
             return
         if result is GraspState.AT_POSITION:
             # free fingers: stop pushing. On an object: keep squeezing at the commanded PWM.
@@ -894,7 +972,7 @@ class WX250s:
 
 
 def check_limits(joints: Sequence[JointSpec], q0: Sequence[float], traj: JointTrajectory) -> str:
-    """"" when ``traj`` (joints in ``joints`` order, starting from ``q0``) respects every
+    """ "" when ``traj`` (joints in ``joints`` order, starting from ``q0``) respects every
     joint's range and velocity limit, else a one-line reason naming the joint."""
     prev_t, prev_q = 0.0, tuple(q0)
     for i, (t, q) in enumerate(zip(traj.times, traj.positions)):
@@ -902,14 +980,18 @@ def check_limits(joints: Sequence[JointSpec], q0: Sequence[float], traj: JointTr
             if not math.isfinite(x):
                 return f"waypoint {i}: {j.name} is not a finite number"
             if not j.lower - 1e-9 <= x <= j.upper + 1e-9:
-                return (f"waypoint {i}: {j.name} = {x:.4f} rad outside its limits "
-                        f"[{j.lower:.4f}, {j.upper:.4f}] rad; nothing was sent")
+                return (
+                    f"waypoint {i}: {j.name} = {x:.4f} rad outside its limits "
+                    f"[{j.lower:.4f}, {j.upper:.4f}] rad; nothing was sent"
+                )
         dt = t - prev_t
         for j, a, b in zip(joints, prev_q, q):
             v = abs(b - a) / dt
             if v > j.velocity * (1 + 1e-6):
-                return (f"waypoint {i}: {j.name} would move at {v:.3f} rad/s, above its limit "
-                        f"{j.velocity:.3f} rad/s; nothing was sent")
+                return (
+                    f"waypoint {i}: {j.name} would move at {v:.3f} rad/s, above its limit "
+                    f"{j.velocity:.3f} rad/s; nothing was sent"
+                )
         prev_t, prev_q = t, q
     return ""
 

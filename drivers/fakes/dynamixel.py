@@ -73,8 +73,14 @@ class FakeServo:
     an injected object position [pulses] that stalls motion toward it.
     """
 
-    def __init__(self, dxl_id: int, model: Model, *, position: int = 2048,
-                 stops: tuple[int, int] | None = None) -> None:
+    def __init__(
+        self,
+        dxl_id: int,
+        model: Model,
+        *,
+        position: int = 2048,
+        stops: tuple[int, int] | None = None,
+    ) -> None:
         self.model = model
         self.present = True
         self.stops = stops
@@ -86,8 +92,8 @@ class FakeServo:
         self._set("id", dxl_id)
         self._set("baud_rate", 3)
         self.pos = float(position)
-        self.vel = 0.0          # [velocity units]
-        self.load = 0           # [0.1 % or current units]
+        self.vel = 0.0  # [velocity units]
+        self.load = 0  # [0.1 % or current units]
         self._from = self.pos
         self._goal = self.pos
         self._t0 = 0.0
@@ -101,17 +107,19 @@ class FakeServo:
     def _reset_memory(self, *, keep_id: bool, keep_baud: bool) -> None:
         keep = {n: self.get(n) for n, k in (("id", keep_id), ("baud_rate", keep_baud)) if k}
         for r in self.model.registers:
-            self.mem[r.address:r.address + r.size] = (r.default & ((1 << (8 * r.size)) - 1)).to_bytes(r.size, "little")
+            self.mem[r.address : r.address + r.size] = (
+                r.default & ((1 << (8 * r.size)) - 1)
+            ).to_bytes(r.size, "little")
         for n, v in keep.items():
             self._set(n, v)
 
     def get(self, name: str) -> int:
         r = self.model.reg(name)
-        return int.from_bytes(self.mem[r.address:r.address + r.size], "little", signed=r.signed)
+        return int.from_bytes(self.mem[r.address : r.address + r.size], "little", signed=r.signed)
 
     def _set(self, name: str, value: int) -> None:
         r = self.model.reg(name)
-        self.mem[r.address:r.address + r.size] = codec.int_to_le(int(value), r.size)
+        self.mem[r.address : r.address + r.size] = codec.int_to_le(int(value), r.size)
 
     @property
     def id(self) -> int:
@@ -170,7 +178,7 @@ class FakeServo:
                 elif step > 0 and new >= hi:
                     new, blocked = float(hi), True
             self.vel = 0.0 if blocked else v
-            self.load = int(round(1000 * pwm / limit)) if blocked else int(round(100 * pwm / limit))
+            self.load = round(1000 * pwm / limit) if blocked else round(100 * pwm / limit)
             self.pos = new
         else:
             if self._dur <= 0 or now >= self._t0 + self._dur:
@@ -179,13 +187,15 @@ class FakeServo:
                 a = (now - self._t0) / self._dur
                 self.pos = self._from + a * (self._goal - self._from)
                 self.vel = (self._goal - self._from) / self._dur / _PULSES_S_PER_UNIT
-            self.load = int(round(self.vel * 2))
+            self.load = round(self.vel * 2)
         self._store_motion()
 
     def _store_motion(self) -> None:
-        self._set("present_position", int(round(self.pos)))
-        self._set("present_velocity", int(round(self.vel)))
-        self._set("present_load" if self.model.has("present_load") else "present_current", self.load)
+        self._set("present_position", round(self.pos))
+        self._set("present_velocity", round(self.vel))
+        self._set(
+            "present_load" if self.model.has("present_load") else "present_current", self.load
+        )
         moving = 1 if abs(self.vel) > 0.5 else 0
         self._set("moving", moving)
         self._set("moving_status", 0 if moving else 1)
@@ -206,7 +216,7 @@ class FakeServo:
         self.update(now)
         self._goal = self._from = self.pos
         self._dur = 0.0
-        self._set("goal_position", int(round(self.pos)))
+        self._set("goal_position", round(self.pos))
 
     def _watchdog_fire(self, now: float) -> None:
         self.hold(now)
@@ -233,7 +243,7 @@ class FakeServo:
         self.update(now)
         if length <= 0 or address + length > _MEM_SIZE or not self.model.covering(address, 1):
             return StatusResult.ACCESS_ERROR, b""
-        return 0, bytes(self.mem[address:address + length])
+        return 0, bytes(self.mem[address : address + length])
 
     def check_write(self, address: int, data: bytes) -> int:
         regs = self.model.covering(address, len(data))
@@ -246,14 +256,20 @@ class FakeServo:
                 return StatusResult.ACCESS_ERROR
             if r.area is Area.EEPROM and self.torque:
                 return StatusResult.ACCESS_ERROR
-            value = int.from_bytes(data[r.address - address:r.address - address + r.size], "little", signed=r.signed)
+            value = int.from_bytes(
+                data[r.address - address : r.address - address + r.size], "little", signed=r.signed
+            )
             if r.name == "operating_mode" and value not in self.model.operating_modes:
                 return StatusResult.DATA_RANGE_ERROR
-            if r.name in ("goal_position", "goal_pwm", "goal_velocity", "goal_current") and self.get("bus_watchdog") == -1:
+            if (
+                r.name in ("goal_position", "goal_pwm", "goal_velocity", "goal_current")
+                and self.get("bus_watchdog") == -1
+            ):
                 return StatusResult.DATA_RANGE_ERROR
-            if r.name == "goal_position" and self.get("operating_mode") == OperatingMode.POSITION:
-                if not self.get("min_position_limit") <= value <= self.get("max_position_limit"):
-                    return StatusResult.DATA_LIMIT_ERROR
+            in_position_mode = self.get("operating_mode") == OperatingMode.POSITION
+            lo, hi = self.get("min_position_limit"), self.get("max_position_limit")
+            if r.name == "goal_position" and in_position_mode and not lo <= value <= hi:
+                return StatusResult.DATA_LIMIT_ERROR
             if r.name == "goal_pwm" and abs(value) > self.get("pwm_limit"):
                 return StatusResult.DATA_LIMIT_ERROR
             if r.name == "torque_enable" and value == 1 and self.alert:
@@ -266,11 +282,14 @@ class FakeServo:
         if err:
             return err
         torque_before = self.torque
-        self.mem[address:address + len(data)] = data
+        self.mem[address : address + len(data)] = data
         if not torque_before and self.torque:
             # torque on: hold where it is unless a goal is written in the same packet
             self.hold(now)
-        if self.model.reg("goal_position").address in range(address, address + len(data)) and self.torque:
+        if (
+            self.model.reg("goal_position").address in range(address, address + len(data))
+            and self.torque
+        ):
             self._start_move(self.get("goal_position"), now)
         return 0
 
@@ -294,7 +313,10 @@ def wx250s_servos(*, locobot: bool = False, configured: bool = False) -> list[Fa
     sleep = (0.0, -1.1, 1.55, 0.0, 0.5, 0.0) if locobot else (0.0, -1.80, 1.55, 0.0, 0.8, 0.0)
     waist, shoulder, elbow, roll, wangle, wrot = (rad_to_pulses(q) for q in sleep)
     # finger end stops: 30 mm and 74 mm between the pads (robots.md 1.3)
-    grip_lo, grip_hi = rad_to_pulses(gripper_angle_for_width(0.030)), rad_to_pulses(gripper_angle_for_width(0.074))
+    grip_lo, grip_hi = (
+        rad_to_pulses(gripper_angle_for_width(0.030)),
+        rad_to_pulses(gripper_angle_for_width(0.074)),
+    )
     spec = [
         (1, XM430_W350, waist, 0, 255, (0, 4095)),
         (2, XM430_W350, shoulder, 0, 255, (819, 3345)),
@@ -307,10 +329,15 @@ def wx250s_servos(*, locobot: bool = False, configured: bool = False) -> list[Fa
         (9, XL430_W250, 2048, 0, 255, (0, 4095)),
     ]
     if locobot:
-        spec += [(10, XL430_W250, 2048, 0, 255, (1024, 3072)), (11, XL430_W250, 2048, 1, 255, (1024, 3072))]
+        spec += [
+            (10, XL430_W250, 2048, 0, 255, (1024, 3072)),
+            (11, XL430_W250, 2048, 1, 255, (1024, 3072)),
+        ]
     servos = []
     for dxl_id, model, pos, drive, secondary, (lo, hi) in spec:
-        s = FakeServo(dxl_id, model, position=pos, stops=(grip_lo, grip_hi) if dxl_id == 9 else None)
+        s = FakeServo(
+            dxl_id, model, position=pos, stops=(grip_lo, grip_hi) if dxl_id == 9 else None
+        )
         if configured:
             s._set("return_delay_time", 0)
             s._set("drive_mode", drive | (0x04 if dxl_id <= 8 else 0))
@@ -327,8 +354,13 @@ def wx250s_servos(*, locobot: bool = False, configured: bool = False) -> list[Fa
 class FakeDxlBus(PtyDevice):
     """A multidrop bus of :class:`FakeServo` on a pty (see the module docstring)."""
 
-    def __init__(self, servos: Iterable[FakeServo] | None = None, *, name: str = "fake-dxl",
-                 honour_return_delay: bool = True) -> None:
+    def __init__(
+        self,
+        servos: Iterable[FakeServo] | None = None,
+        *,
+        name: str = "fake-dxl",
+        honour_return_delay: bool = True,
+    ) -> None:
         super().__init__(name)
         self.servos: list[FakeServo] = list(servos) if servos is not None else wx250s_servos()
         self.honour_return_delay = honour_return_delay
@@ -336,8 +368,8 @@ class FakeDxlBus(PtyDevice):
         self.corrupt_instructions = 0
         self.corrupt_replies = 0
         self.truncate_replies = 0
-        self.goal_writes = 0          # packets that wrote Goal Position / Goal PWM to a servo
-        self.instructions: list[tuple[int, int]] = []   # (id, instruction) received, bounded
+        self.goal_writes = 0  # packets that wrote Goal Position / Goal PWM to a servo
+        self.instructions: list[tuple[int, int]] = []  # (id, instruction) received, bounded
         self._parser = codec.PacketParser()
         self._mlock = threading.Lock()
 
@@ -414,7 +446,7 @@ class FakeDxlBus(PtyDevice):
         if len(self.instructions) < 10000:
             self.instructions.append((item.id, item.instruction))
         for s in self.servos:
-            s.update(now)   # a Bus Watchdog expires on the gap before this instruction
+            s.update(now)  # a Bus Watchdog expires on the gap before this instruction
             s.touch(now)
         handler = _HANDLERS.get(item.instruction)
         if handler is None:
@@ -432,12 +464,17 @@ class FakeDxlBus(PtyDevice):
     def _ping(self, p: Packet, now: float) -> None:
         for s, replies in sorted(self._addressed(p.id), key=lambda x: x[0].id):
             if replies or p.id == BROADCAST_ID:
-                self._reply(s, 0, codec.int_to_le(s.model.number, 2) + bytes((s.get("firmware_version"),)))
+                self._reply(
+                    s, 0, codec.int_to_le(s.model.number, 2) + bytes((s.get("firmware_version"),))
+                )
 
     def _read(self, p: Packet, now: float) -> None:
         if len(p.params) != 4:
             return self._each_reply(p, StatusResult.DATA_LENGTH_ERROR)
-        address, length = int.from_bytes(p.params[:2], "little"), int.from_bytes(p.params[2:], "little")
+        address, length = (
+            int.from_bytes(p.params[:2], "little"),
+            int.from_bytes(p.params[2:], "little"),
+        )
         for s, replies in self._addressed(p.id):
             err, data = s.read(address, length, now)
             if replies and s.get("status_return_level") >= 1:
@@ -500,7 +537,11 @@ class FakeDxlBus(PtyDevice):
         ok = p.params == b"\x01" + codec.CLEAR_KEY
         for s, replies in self._addressed(p.id):
             s.update(now)
-            err = 0 if ok and s.vel == 0 else (StatusResult.DATA_RANGE_ERROR if not ok else StatusResult.RESULT_FAIL)
+            err = (
+                0
+                if ok and s.vel == 0
+                else (StatusResult.DATA_RANGE_ERROR if not ok else StatusResult.RESULT_FAIL)
+            )
             if replies and s.get("status_return_level") >= 2:
                 self._reply(s, err)
 

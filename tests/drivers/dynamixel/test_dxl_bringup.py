@@ -9,7 +9,6 @@ import subprocess
 import sys
 
 import pytest
-
 from mmexec.drivers.dynamixel import bringup
 from mmexec.drivers.fakes.dynamixel import FakeDxlBus
 
@@ -37,7 +36,9 @@ def test_ping_lists_servos(fake: FakeDxlBus, capsys: pytest.CaptureFixture[str])
     assert lines[8] == "id 9: XL430-W250 (model 1060), firmware 46"
 
 
-def test_ping_reports_missing_ids_and_faults(fake: FakeDxlBus, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ping_reports_missing_ids_and_faults(
+    fake: FakeDxlBus, capsys: pytest.CaptureFixture[str]
+) -> None:
     fake.servo(4).present = False
     fake.inject_hardware_error(2, "overload")
     assert bringup.ping(ping_args("--port", fake.port, "--ids", "1-5", "--latency-ms", "20")) == 1
@@ -46,11 +47,14 @@ def test_ping_reports_missing_ids_and_faults(fake: FakeDxlBus, capsys: pytest.Ca
     assert err.strip() == f"dynamixel {fake.port}: no answer within the deadline from ids 4"
 
 
-def test_ping_silent_bus_and_corrupt_frames(fake: FakeDxlBus, capsys: pytest.CaptureFixture[str]) -> None:
+def test_ping_silent_bus_and_corrupt_frames(
+    fake: FakeDxlBus, capsys: pytest.CaptureFixture[str]
+) -> None:
     fake.silent = True
     assert bringup.ping(ping_args("--port", fake.port, "--ids", "1-2", "--latency-ms", "5")) == 1
     assert capsys.readouterr().err.strip() == (
-        f"dynamixel {fake.port}: no answer within the deadline from any of ids 1-2 at 1000000 baud")
+        f"dynamixel {fake.port}: no answer within the deadline from any of ids 1-2 at 1000000 baud"
+    )
     fake.silent = False
     fake.corrupt_replies = 100
     assert bringup.ping(ping_args("--port", fake.port, "--ids", "1", "--latency-ms", "5")) == 1
@@ -66,11 +70,17 @@ def test_ping_port_errors(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_run_fake_serves_until_sigterm() -> None:
-    code = ("import argparse, sys\nfrom mmexec.drivers.dynamixel import bringup as b\n"
-            "p = argparse.ArgumentParser(); b.add_fake_arguments(p)\n"
-            "sys.exit(b.run_fake(p.parse_args(sys.argv[1:])))\n")
-    proc = subprocess.Popen([sys.executable, "-c", code, "--locobot"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    code = (
+        "import argparse, sys\nfrom mmexec.drivers.dynamixel import bringup as b\n"
+        "p = argparse.ArgumentParser(); b.add_fake_arguments(p)\n"
+        "sys.exit(b.run_fake(p.parse_args(sys.argv[1:])))\n"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, "--locobot"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout is not None
         port = proc.stdout.readline().strip()

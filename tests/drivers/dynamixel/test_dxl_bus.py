@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 
 import pytest
-
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.codec import BadFrame, Packet, StatusResult
 
@@ -33,7 +32,9 @@ def test_ping_worked_example_from_doc() -> None:
 def test_read_and_write_examples() -> None:
     # e-Manual: read 4 bytes of Present Position (132) from id 1; write 512 to Goal Position
     assert codec.read(1, 132, 4) == h("FF FF FD 00 01 07 00 02 84 00 04 00 1D 15")
-    assert codec.write(1, 116, (512).to_bytes(4, "little")) == h("FF FF FD 00 01 09 00 03 74 00 00 02 00 00 CA 89")
+    assert codec.write(1, 116, (512).to_bytes(4, "little")) == h(
+        "FF FF FD 00 01 09 00 03 74 00 00 02 00 00 CA 89"
+    )
 
 
 def test_sync_write_two_servos_by_hand() -> None:
@@ -60,7 +61,9 @@ def test_other_instructions_by_hand() -> None:
     assert codec.reboot(2) == frame(2, h("08"))
     assert codec.factory_reset(1, 0x01) == frame(1, h("06 01"))
     assert codec.clear_multi_turn(1) == frame(1, h("10 01 44 58 4C 22"))
-    assert codec.bulk_read([(1, 132, 4), (2, 126, 2)]) == frame(0xFE, h("92 01 84 00 04 00 02 7E 00 02 00"))
+    assert codec.bulk_read([(1, 132, 4), (2, 126, 2)]) == frame(
+        0xFE, h("92 01 84 00 04 00 02 7E 00 02 00")
+    )
     assert codec.bulk_write([(1, 64, b"\x01"), (2, 116, b"\x00\x08\x00\x00")]) == frame(
         0xFE, h("93 01 40 00 01 00 01 02 74 00 04 00 00 08 00 00")
     )

@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 
 import pytest
-
 from mmexec.drivers.dynamixel import control_table as ct
 
 
@@ -20,9 +19,16 @@ def test_models_and_registers() -> None:
     assert xl.reg("present_load").address == 126 and not xl.has("present_current")
     assert not xl.has("current_limit") and x540.reg("current_limit").default == 2047
     assert xl.reg("temperature_limit").default == 72 and xm.reg("temperature_limit").default == 80
-    assert ct.OperatingMode.CURRENT not in xl.operating_modes and ct.OperatingMode.PWM in xl.operating_modes
+    assert (
+        ct.OperatingMode.CURRENT not in xl.operating_modes
+        and ct.OperatingMode.PWM in xl.operating_modes
+    )
     assert [r.name for r in xm.covering(126, 12)] == [
-        "present_current", "present_velocity", "present_position", "velocity_trajectory"]
+        "present_current",
+        "present_velocity",
+        "present_position",
+        "velocity_trajectory",
+    ]
     with pytest.raises(KeyError, match="unknown DYNAMIXEL model number 12"):
         ct.model_by_number(12)
 

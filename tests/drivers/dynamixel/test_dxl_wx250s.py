@@ -9,7 +9,6 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-
 from mmexec.drivers.dynamixel.bus import HardwareFault, NoReply, PortUnavailable
 from mmexec.drivers.dynamixel.control_table import OperatingMode, pulses_to_rad
 from mmexec.drivers.dynamixel.wx250s import (
@@ -75,8 +74,14 @@ def test_bring_up_configures_the_bus(arm: WX250s, fake: FakeDxlBus) -> None:
     assert fake.servo(7).get("drive_mode") == 5 and fake.servo(2).get("drive_mode") == 4
     assert fake.servo(9).get("operating_mode") == OperatingMode.PWM
     assert fake.servo(2).get("operating_mode") == OperatingMode.POSITION
-    assert fake.servo(2).get("min_position_limit") == 819 and fake.servo(4).get("max_position_limit") == 3094
-    assert fake.servo(1).get("profile_velocity") == 100 and fake.servo(1).get("profile_acceleration") == 30
+    assert (
+        fake.servo(2).get("min_position_limit") == 819
+        and fake.servo(4).get("max_position_limit") == 3094
+    )
+    assert (
+        fake.servo(1).get("profile_velocity") == 100
+        and fake.servo(1).get("profile_acceleration") == 30
+    )
     # held where it was: sleep pose, no jump at torque on
     assert arm.arm.state().positions == pytest.approx((0.0, -1.80, 1.55, 0.0, 0.8, 0.0), abs=2e-3)
     assert arm.arm.joint_names == NAMES
@@ -105,7 +110,11 @@ def test_trajectory_streams_and_succeeds(arm: WX250s, fake: FakeDxlBus) -> None:
     [
         ((0.0, -2.5, 0.5, 0.0, 0.3, 0.0), (2.0,), "shoulder = -2.5000 rad outside its limits"),
         ((0.0, -0.5, 1.9, 0.0, 0.3, 0.0), (2.0,), "elbow = 1.9000 rad outside"),
-        ((3.0, -0.5, 0.5, 0.0, 0.3, 0.0), (0.5,), "waist would move at 6.000 rad/s, above its limit"),
+        (
+            (3.0, -0.5, 0.5, 0.0, 0.3, 0.0),
+            (0.5,),
+            "waist would move at 6.000 rad/s, above its limit",
+        ),
     ],
 )
 def test_limits_rejected_before_anything_is_sent(
@@ -115,7 +124,9 @@ def test_limits_rejected_before_anything_is_sent(
     time.sleep(0.05)
     writes0 = fake.goal_writes
     goal = arm.arm.follow(JointTrajectory(NAMES, times, (point,)))
-    assert goal.state is GoalState.FAILED and what in goal.reason and "nothing was sent" in goal.reason
+    assert (
+        goal.state is GoalState.FAILED and what in goal.reason and "nothing was sent" in goal.reason
+    )
     time.sleep(0.1)
     assert fake.goal_writes == writes0
     assert arm.arm.state().positions == pytest.approx(HOME, abs=0.02)
@@ -135,7 +146,9 @@ def test_cancel_holds_position(arm: WX250s, fake: FakeDxlBus) -> None:
     assert pulses_to_rad(fake.servo(1).get("goal_position")) == pytest.approx(held, abs=0.02)
 
 
-@pytest.mark.parametrize("fault", ["overload", "overheating", "input_voltage", "motor_encoder", "electrical_shock"])
+@pytest.mark.parametrize(
+    "fault", ["overload", "overheating", "input_voltage", "motor_encoder", "electrical_shock"]
+)
 def test_hardware_fault_fails_goal_with_name(arm: WX250s, fake: FakeDxlBus, fault: str) -> None:
     goal = arm.arm.follow(JointTrajectory(NAMES, (1.5,), ((0.8, -0.5, 0.5, 0.0, 0.3, 0.0),)))
     time.sleep(0.1)
@@ -174,7 +187,9 @@ def test_smart_reboot_only_faulted_servos(arm: WX250s, fake: FakeDxlBus) -> None
 def test_missing_servo_at_connect_names_id_and_port(fake: FakeDxlBus) -> None:
     fake.servo(5).present = False
     dev = WX250s(cfg(fake.port))
-    with pytest.raises(NoReply, match=rf"{fake.port}: servo id 5 \(elbow_shadow\) did not answer ping \(3 attempts"):
+    with pytest.raises(
+        NoReply, match=rf"{fake.port}: servo id 5 \(elbow_shadow\) did not answer ping \(3 attempts"
+    ):
         dev.connect()
     assert not dev.bus.is_open
 
@@ -191,7 +206,9 @@ def test_missing_servo_mid_motion_fails_goal(arm: WX250s, fake: FakeDxlBus) -> N
     fake.servo(6).present = False
     wait(goal, 1.0)
     assert goal.state is GoalState.FAILED
-    assert "no reply from servo id 6" in goal.reason and "(forearm_roll) for 3 cycles" in goal.reason
+    assert (
+        "no reply from servo id 6" in goal.reason and "(forearm_roll) for 3 cycles" in goal.reason
+    )
     assert fake.port in goal.reason
 
 
@@ -212,7 +229,9 @@ def test_unplug_mid_motion(fake: FakeDxlBus) -> None:
 
 
 @pytest.mark.parametrize("answers", [True, False])
-def test_corrupted_instruction_mid_motion_is_tolerated(arm: WX250s, fake: FakeDxlBus, answers: bool) -> None:
+def test_corrupted_instruction_mid_motion_is_tolerated(
+    arm: WX250s, fake: FakeDxlBus, answers: bool
+) -> None:
     fake.crc_error_reply = answers
     goal = arm.arm.follow(JointTrajectory(NAMES, (0.5,), (HOME,)))
     time.sleep(0.1)
@@ -244,11 +263,15 @@ def test_gripper_close_open_and_object(arm: WX250s, fake: FakeDxlBus) -> None:
     g = arm.gripper.close()
     wait(g, 2.0)
     assert g.state is GoalState.SUCCEEDED
-    assert g.result.grasp is GraspState.AT_POSITION and g.result.width == pytest.approx(0.030, abs=0.002)
+    assert g.result.grasp is GraspState.AT_POSITION and g.result.width == pytest.approx(
+        0.030, abs=0.002
+    )
     assert fake.servo(9).get("goal_pwm") == 0  # free fingers: not pushing
     g = arm.gripper.move(0.06)
     wait(g, 2.0)
-    assert g.result.grasp is GraspState.AT_POSITION and g.result.width == pytest.approx(0.06, abs=0.003)
+    assert g.result.grasp is GraspState.AT_POSITION and g.result.width == pytest.approx(
+        0.06, abs=0.003
+    )
     # an object 45 mm wide between the fingers
     from mmexec.drivers.dynamixel.control_table import rad_to_pulses
 
@@ -278,7 +301,10 @@ def test_locobot_variant(no_leaks: None) -> None:
         try:
             assert sorted(dev.found) == list(range(1, 12))
             assert np.allclose(dev.arm.mount[:3, 3], (0.097277, 0.0, 0.10795))
-            assert fake.servo(11).get("drive_mode") == 1 and fake.servo(10).get("profile_velocity") == 131
+            assert (
+                fake.servo(11).get("drive_mode") == 1
+                and fake.servo(10).get("profile_velocity") == 131
+            )
             assert fake.servo(10).torque
         finally:
             dev.close()
