@@ -1,0 +1,389 @@
+"""Joint-space motion planning with OMPL, time parametrisation, Cartesian straight lines.
+
+:class:`ArmPlanner` plans between joint configurations of the arm of a
+:class:`~mmexec.skills.manipulation.scene.PlanningScene` (validity = the scene's
+collision check) with OMPL 2.0.1 (RRTConnect by default, RRT* to its first solution),
+simplifies the path, and times it into a :class:`JointTrajectory` that respects each
+joint's velocity and acceleration limits: every segment between waypoints is a
+synchronised trapezoidal (or triangular) velocity profile starting and ending at rest,
+sampled densely so the Arm's linear interpolation follows it.
+
+Everything is synchronous and bounded by ``time_limit`` x ``attempts``: a skill calls it
+once between ticks (planning time is milliseconds for the scenes we use) or runs it in a
+worker; nothing here sleeps.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mmexec.drivers.interfaces import JointLimit, JointTrajectory
+from mmexec.skills.manipulation.kinematics import ArmKinematics
+from mmexec.skills.manipulation.scene import PlanningScene
+
+__all__ = ["ArmPlanner", "PlanResult", "PlannerConfig", "time_parametrize"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """``algorithm``: "rrtconnect" or "rrtstar"; ``time_limit`` [s] per attempt;
+    ``attempts``; ``range`` [rad] RRT step (0: OMPL's default); ``resolution`` [rad]
+    longest joint-space step between two checked states on an edge; ``simplify_time`` [s]
+    for OMPL's full simplifier (0: one vertex-reduction pass plus greedy shortcuts, much
+    cheaper; < 0: no simplification);
+    ``velocity_scale`` in (0, 1] of each joint's limit; ``sample_period`` [s] of the timed
+    trajectory; ``seed`` for OMPL's random generator (deterministic planning)."""
+
+    algorithm: str = "rrtconnect"
+    time_limit: float = 1.0
+    attempts: int = 3
+    range: float = 0.0
+    resolution: float = 0.04
+    simplify_time: float = 0.0
+    velocity_scale: float = 0.5
+    acceleration_scale: float = 0.5
+    sample_period: float = 0.05
+    seed: int | None = 0
+
+    def validate(self) -> list[str]:
+        errs = []
+        if self.algorithm not in ("rrtconnect", "rrtstar"):
+            errs.append(f"algorithm: expected 'rrtconnect' or 'rrtstar', got {self.algorithm!r}")
+        if not self.time_limit > 0:
+            errs.append(f"time_limit: must be > 0 s, got {self.time_limit}")
+        if self.attempts < 1:
+            errs.append(f"attempts: must be >= 1, got {self.attempts}")
+        if not 0 < self.velocity_scale <= 1 or not 0 < self.acceleration_scale <= 1:
+            errs.append("velocity_scale and acceleration_scale must be in (0, 1]")
+        if not self.resolution > 0 or not self.sample_period > 0:
+            errs.append("resolution and sample_period must be > 0")
+        return errs
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """``success``; ``reason`` when not ("no IK", "start in collision: ...", "goal in
+    collision: ...", "no plan within 1.0 s x 3 attempts", ...); ``planning_time`` [s]
+    (wall time spent planning, for logs and benchmarks); ``path`` joint waypoints;
+    ``trajectory`` timed for the Arm; ``attempts`` used."""
+
+    success: bool
+    reason: str = ""
+    planning_time: float = 0.0
+    path: list[tuple[float, ...]] = field(default_factory=list)
+    trajectory: JointTrajectory | None = None
+    attempts: int = 0
+
+
+def _segment_time(delta: np.ndarray, vmax: np.ndarray, amax: np.ndarray) -> float:
+    """Shortest duration [s] of a rest-to-rest move of every joint by ``delta`` together."""
+    T = 0.0
+    for d, v, a in zip(np.abs(delta), vmax, amax):
+        if d <= 0:
+            continue
+        if d <= v * v / a:
+            t = 2.0 * math.sqrt(d / a)
+        else:
+            t = d / v + v / a
+        T = max(T, t)
+    return T
+
+
+def _profile(s_t: float, T: float) -> float:
+    """Normalised position in [0, 1] at time ``s_t`` of a symmetric trapezoid of duration T
+    whose acceleration phase lasts T/4 (a time-optimal trapezoid is no longer than this
+    one stretched: peak speed 4/(3T), acceleration 16/(3T^2), both checked by callers)."""
+    ta = T / 4.0
+    vp = 1.0 / (T - ta)
+    a = vp / ta
+    if s_t <= ta:
+        return 0.5 * a * s_t * s_t
+    if s_t <= T - ta:
+        return 0.5 * a * ta * ta + vp * (s_t - ta)
+    r = T - s_t
+    return 1.0 - 0.5 * a * r * r
+
+
+def time_parametrize(
+    joint_names: Sequence[str],
+    path: Sequence[Sequence[float]],
+    limits: Sequence[JointLimit],
+    *,
+    velocity_scale: float = 0.5,
+    acceleration_scale: float = 0.5,
+    sample_period: float = 0.05,
+    default_acceleration: float = 2.0,
+) -> JointTrajectory:
+    """Time ``path`` (joint waypoints, the first being the current position) into a
+    :class:`JointTrajectory`. Each segment is a rest-to-rest trapezoid (accelerating for a
+    quarter of its time, cruising, decelerating), all joints synchronised, with duration
+    chosen so that no joint exceeds ``velocity_scale`` x its velocity limit nor
+    ``acceleration_scale`` x its acceleration limit (``default_acceleration`` [rad/s^2]
+    where the limit is infinite). Samples every ``sample_period`` [s] at most."""
+    if len(path) < 2:
+        q = tuple(float(x) for x in path[-1]) if path else ()
+        if not q:
+            raise ValueError("time_parametrize: empty path")
+        return JointTrajectory(tuple(joint_names), (sample_period,), (q,))
+    vmax = np.array([lim.velocity for lim in limits]) * velocity_scale
+    amax = np.array([lim.acceleration if math.isfinite(lim.acceleration) else default_acceleration for lim in limits])
+    amax = amax * acceleration_scale
+    times: list[float] = []
+    points: list[tuple[float, ...]] = []
+    t0 = 0.0
+    for a, b in zip(path, path[1:]):
+        qa, qb = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        delta = qb - qa
+        if not np.any(np.abs(delta) > 1e-12):
+            continue
+        # the quarter-time trapezoid peaks at 4/3 of the mean speed with acceleration
+        # 16/(3 T^2) x delta: choose T so both stay within the limits
+        T = 0.0
+        for d, v, acc in zip(np.abs(delta), vmax, amax):
+            if d > 0:
+                T = max(T, 4.0 * d / (3.0 * v), math.sqrt(16.0 * d / (3.0 * acc)))
+        T = max(T, _segment_time(delta, vmax, amax), 1e-3)
+        n = max(2, int(math.ceil(T / sample_period)))
+        for k in range(1, n + 1):
+            t = T * k / n
+            s = _profile(t, T)
+            times.append(t0 + t)
+            points.append(tuple(float(x) for x in qa + s * delta))
+        t0 += T
+    if not times:
+        return JointTrajectory(tuple(joint_names), (sample_period,), (tuple(float(x) for x in path[-1]),))
+    return JointTrajectory(tuple(joint_names), tuple(times), tuple(points))
+
+
+class ArmPlanner:
+    """Plans for the arm of ``scene`` with kinematics ``kin`` (joint order must match)."""
+
+    def __init__(self, scene: PlanningScene, kin: ArmKinematics, config: PlannerConfig | None = None) -> None:
+        if tuple(scene.model.arm_joints) != tuple(kin.joint_names):
+            raise ValueError(
+                f"planner: scene joints {scene.model.arm_joints} differ from kinematics joints {kin.joint_names}"
+            )
+        self.scene = scene
+        self.kin = kin
+        self.config = config or PlannerConfig()
+        errs = self.config.validate()
+        if errs:
+            raise ValueError("PlannerConfig: " + "; ".join(errs))
+
+    # ------------------------------------------------------------------ joint goals
+    def plan(self, q_start: Sequence[float], q_goal: Sequence[float], config: PlannerConfig | None = None) -> PlanResult:
+        """Collision-free joint path from ``q_start`` to ``q_goal`` [rad], timed."""
+        cfg = config or self.config
+        t_begin = time.perf_counter()
+        scene = self.scene
+        if not scene.is_valid(q_start):
+            return PlanResult(False, f"start in collision: {_pairs(scene.collisions(q_start)) or 'outside joint limits'}",
+                              time.perf_counter() - t_begin)
+        if not scene.is_valid(q_goal):
+            return PlanResult(False, f"goal in collision: {_pairs(scene.collisions(q_goal)) or 'outside joint limits'}",
+                              time.perf_counter() - t_begin)
+        path: list[tuple[float, ...]] | None = None
+        used = 0
+        if self._motion_valid(q_start, q_goal, cfg.resolution):
+            path = [tuple(map(float, q_start)), tuple(map(float, q_goal))]
+        else:
+            for attempt in range(cfg.attempts):
+                used = attempt + 1
+                path = self._ompl(q_start, q_goal, cfg, attempt)
+                if path is not None:
+                    break
+        elapsed = time.perf_counter() - t_begin
+        if path is None:
+            return PlanResult(False, f"no plan within {cfg.time_limit:g} s x {cfg.attempts} attempts", elapsed, attempts=used)
+        traj = time_parametrize(self.kin.joint_names, path, self.kin.limits,
+                                velocity_scale=cfg.velocity_scale, acceleration_scale=cfg.acceleration_scale,
+                                sample_period=cfg.sample_period)
+        return PlanResult(True, "", elapsed, path, traj, used)
+
+    def _motion_valid(self, a: Sequence[float], b: Sequence[float], resolution: float) -> bool:
+        qa, qb = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        n = max(1, int(math.ceil(float(np.max(np.abs(qb - qa))) / resolution)))
+        return all(self.scene.is_valid(qa + (qb - qa) * k / n) for k in range(1, n + 1))
+
+    def _ompl(self, q_start: Sequence[float], q_goal: Sequence[float], cfg: PlannerConfig, attempt: int) -> list[tuple[float, ...]] | None:
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+
+        ou.setLogLevel(ou.LogLevel.LOG_WARN)
+        _seed_ompl_once(cfg.seed)
+        n = self.kin.dof
+        space = ob.RealVectorStateSpace(n)
+        bounds = ob.RealVectorBounds(n)
+        for i, (lo, hi) in enumerate(self.scene.limits):
+            bounds.setLow(i, float(lo))
+            bounds.setHigh(i, float(hi))
+        space.setBounds(bounds)
+        ss = og.SimpleSetup(space)
+        is_valid = self.scene.is_valid
+
+        def check(s: object) -> bool:
+            return is_valid([s[i] for i in range(n)])  # type: ignore[index]
+
+        ss.setStateValidityChecker(check)
+        si = ss.getSpaceInformation()
+        si.setStateValidityCheckingResolution(cfg.resolution / si.getMaximumExtent())
+        start, goal = si.allocState(), si.allocState()
+        for i in range(n):
+            start[i] = float(q_start[i])
+            goal[i] = float(q_goal[i])
+        ss.setStartAndGoalStates(start, goal)
+        if cfg.algorithm == "rrtstar":
+            planner = og.RRTstar(si)
+            obj = ob.PathLengthOptimizationObjective(si)
+            obj.setCostThreshold(ob.Cost(math.inf))  # stop at the first solution
+            ss.setOptimizationObjective(obj)
+        else:
+            planner = og.RRTConnect(si)
+        if cfg.range > 0:
+            planner.setRange(cfg.range)
+        ss.setPlanner(planner)
+        status = ss.solve(ob.timedPlannerTerminationCondition(cfg.time_limit))
+        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
+            return None
+        sol = ss.getSolutionPath()
+        raw = [tuple(float(st[i]) for i in range(n)) for st in sol.getStates()]
+        if cfg.simplify_time > 0:
+            ss.simplifySolution(cfg.simplify_time)
+        elif cfg.simplify_time == 0:
+            # cheap: one pass of OMPL's vertex reduction, then greedy shortcuts (ours)
+            ss.getPathSimplifier().reduceVertices(sol, len(raw) * 2)
+        path = [tuple(float(st[i]) for i in range(n)) for st in ss.getSolutionPath().getStates()]
+        if cfg.simplify_time == 0:
+            path = self._shortcut(path, cfg.resolution)
+        # OMPL interpolates edges by Euclidean distance, we by the largest joint step:
+        # a thin obstacle can fall between the samples of one and not the other
+        if not all(self._motion_valid(a, b, cfg.resolution) for a, b in zip(path, path[1:])):
+            if all(self._motion_valid(a, b, cfg.resolution) for a, b in zip(raw, raw[1:])):
+                return raw
+            log.info("planner: path failed re-validation at %.3f rad; next attempt", cfg.resolution)
+            return None
+        return path
+
+    def _shortcut(self, path: list[tuple[float, ...]], resolution: float) -> list[tuple[float, ...]]:
+        """Greedy shortcutting: from each kept waypoint jump to the farthest one reachable
+        by a collision-free straight joint-space motion."""
+        if len(path) <= 2:
+            return path
+        out = [path[0]]
+        i = 0
+        while i < len(path) - 1:
+            j = len(path) - 1
+            while j > i + 1 and not self._motion_valid(path[i], path[j], resolution):
+                j -= 1
+            out.append(path[j])
+            i = j
+        return out
+
+    # ------------------------------------------------------------------ pose goals
+    def plan_to_pose(
+        self,
+        q_start: Sequence[float],
+        T_target: np.ndarray,
+        *,
+        free_approach_rotation: bool = False,
+        ik_attempts: int = 20,
+        config: PlannerConfig | None = None,
+    ) -> PlanResult:
+        """Plan to a tool pose ``T_target`` (4x4 in the arm base): a collision-free IK
+        solution (seeded from ``q_start``) then :meth:`plan`."""
+        t0 = time.perf_counter()
+        q_goal = self.kin.ik(T_target, q_start, free_approach_rotation=free_approach_rotation,
+                             attempts=ik_attempts, is_valid=self.scene.is_valid)
+        if q_goal is None:
+            reason = "no IK" if self.kin.ik(T_target, q_start, free_approach_rotation=free_approach_rotation,
+                                             attempts=ik_attempts) is None else "no collision-free IK"
+            return PlanResult(False, reason, time.perf_counter() - t0)
+        r = self.plan(q_start, q_goal, config)
+        return PlanResult(r.success, r.reason, time.perf_counter() - t0, r.path, r.trajectory, r.attempts)
+
+    def cartesian_path(
+        self,
+        q_start: Sequence[float],
+        T_goal: np.ndarray,
+        *,
+        step: float = 0.01,
+        max_joint_step: float = 0.25,
+        free_approach_rotation: bool = False,
+        config: PlannerConfig | None = None,
+    ) -> PlanResult:
+        """Straight tool line from the pose at ``q_start`` to ``T_goal`` (4x4, arm base):
+        positions interpolated linearly every ``step`` [m], rotations by slerp, IK per
+        waypoint seeded by the previous one. Fails when a waypoint has no IK, a joint
+        jumps more than ``max_joint_step`` [rad] between waypoints, or a motion collides."""
+        cfg = config or self.config
+        t0 = time.perf_counter()
+        from mmexec.skills.perception.averaging import matrix_to_quat, quat_to_matrix
+
+        q = np.asarray(q_start, dtype=float)
+        if not self.scene.is_valid(q):
+            return PlanResult(False, f"start in collision: {_pairs(self.scene.collisions(q))}", time.perf_counter() - t0)
+        T0 = self.kin.fk(q)
+        T1 = np.asarray(T_goal, dtype=float)
+        dist = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3]))
+        q0, q1 = matrix_to_quat(T0[:3, :3]), matrix_to_quat(T1[:3, :3])
+        if np.dot(q0, q1) < 0:
+            q1 = -q1
+        ang = math.acos(min(1.0, abs(float(np.dot(q0, q1))))) * 2
+        n = max(1, int(math.ceil(max(dist / step, ang / 0.05))))
+        path = [tuple(q)]
+        for k in range(1, n + 1):
+            s = k / n
+            T = np.eye(4)
+            T[:3, 3] = T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3])
+            T[:3, :3] = quat_to_matrix(_slerp(q0, q1, s))
+            qn = self.kin.ik(T, q, free_approach_rotation=free_approach_rotation, attempts=1, max_iterations=60)
+            if qn is None:
+                return PlanResult(False, f"no IK at {100 * s:.0f} % of the straight line", time.perf_counter() - t0)
+            if float(np.max(np.abs(qn - q))) > max_joint_step:
+                return PlanResult(False, f"joint jump at {100 * s:.0f} % of the straight line", time.perf_counter() - t0)
+            if not self._motion_valid(q, qn, cfg.resolution):
+                hit = _pairs(self.scene.collisions(qn))
+                return PlanResult(False, f"straight line in collision at {100 * s:.0f} %: {hit}", time.perf_counter() - t0)
+            path.append(tuple(float(x) for x in qn))
+            q = qn
+        traj = time_parametrize(self.kin.joint_names, path, self.kin.limits,
+                                velocity_scale=cfg.velocity_scale, acceleration_scale=cfg.acceleration_scale,
+                                sample_period=cfg.sample_period)
+        return PlanResult(True, "", time.perf_counter() - t0, path, traj, 1)
+
+
+_OMPL_SEEDED: list[int] = []
+
+
+def _seed_ompl_once(seed: int | None) -> None:
+    """OMPL's global generator can be seeded only before its first use in the process;
+    later calls would just print an error. So the first planner seeds it, and runs are
+    deterministic for a given process-wide sequence of queries."""
+    if seed is None or _OMPL_SEEDED:
+        return
+    from ompl import util as ou
+
+    ou.RNG.setSeed(int(seed) + 1)
+    _OMPL_SEEDED.append(int(seed))
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+    d = float(np.clip(np.dot(q0, q1), -1.0, 1.0))
+    if d > 0.9995:
+        q = q0 + s * (q1 - q0)
+        return q / np.linalg.norm(q)
+    th = math.acos(d)
+    return (math.sin((1 - s) * th) * q0 + math.sin(s * th) * q1) / math.sin(th)
+
+
+def _pairs(pairs: list[tuple[str, str]]) -> str:
+    return ", ".join(f"{a} vs {b}" for a, b in pairs[:3]) + (" ..." if len(pairs) > 3 else "")
