@@ -95,7 +95,13 @@ RUNTIME_STATES = {0: "stopping", 1: "stopped", 2: "playing", 3: "pausing", 4: "p
 
 
 class URConnectionError(CapabilityError):
-    """Connecting to the controller failed or timed out (one-line message naming host:port)."""
+    """Connecting to the controller failed or timed out (one-line message naming host:port).
+
+    ``detail`` is the reason without the ``host:port:`` prefix."""
+
+    def __init__(self, message: str, detail: str = "") -> None:
+        super().__init__(message)
+        self.detail = detail or message
 
 
 class MonotonicClock(Clock):
@@ -163,11 +169,12 @@ def probe_port(host: str, port: int, timeout: float) -> None:
         with socket.create_connection((host, port), timeout=timeout):
             return
     except ConnectionRefusedError:
-        raise URConnectionError(f"{host}:{port}: connection refused (is the controller on and RTDE enabled?)") from None
+        detail = "connection refused (is the controller on and RTDE enabled?)"
     except TimeoutError:
-        raise URConnectionError(f"{host}:{port}: no answer within {timeout:.1f} s") from None
+        detail = f"no answer within {timeout:.1f} s"
     except OSError as e:
-        raise URConnectionError(f"{host}:{port}: {e.strerror or e}") from None
+        detail = str(e.strerror or e)
+    raise URConnectionError(f"{host}:{port}: {detail}", detail)
 
 
 ControlFactory = Callable[[str, float], Any]
@@ -549,7 +556,11 @@ class URArm(Arm):
             reason = _one_line(e)
             with self._lock:
                 self._stalled = ""
-            goal.fail(reason if not isinstance(e, RuntimeError) else f"cannot connect: {reason}")
+            if isinstance(e, URConnectionError):
+                reason = e.detail
+            elif isinstance(e, RuntimeError):
+                reason = f"cannot connect: {reason}"
+            goal.fail(reason)
             self._unwatch(goal)
             return
         if goal.done():  # gave up waiting (open() timed out): do not keep a late link
