@@ -278,6 +278,7 @@ class WX250sConfig:
     max_missed_cycles: int = 3
     torque_off_on_close: bool = False
     shutdown_mask: int = 0x3D
+    reboot_timeout: float = 1.0
     gripper_pwm_min: int = 150
     gripper_pwm_max: int = 350
     gripper_max_force: float = 5.0
@@ -372,7 +373,7 @@ class WX250s:
         self._grip_pwm = 0
         self._grip_state: GripperState | None = None
         self._faults: dict[int, tuple[str, ...]] = {}
-        self._requests: list[Callable[[], None]] = []
+        self._requests: list[Callable[[], bool]] = []
         self._missed = 0
         self._link_error = ""
         self._connected = False
@@ -605,7 +606,7 @@ class WX250s:
         if run is not None:
             run.goal.cancel()
         else:
-            self._request(self._hold_present)
+            self._request(self._hold_request)
 
     def _on_cancel(self, goal: Goal) -> None:
         # the I/O thread notices CANCELLING, holds and marks the goal cancelled
@@ -660,39 +661,71 @@ class WX250s:
             goal.fail(f"{self.bus.port}: wx250s is not connected (call connect() first)")
             return goal
 
-        def work() -> None:
+        state: dict[str, object] = {"targets": None, "since": 0.0}
+        reboot_timeout = self.config.reboot_timeout
+
+        def work() -> bool:
+            """One step per cycle: reboot, then ping (one try per cycle) until every rebooted
+            servo answers, then restore goal = present and torque. True when finished."""
             try:
-                targets = ids
+                targets = state["targets"]
                 if targets is None:
-                    targets = [i for i in self.servo_ids() if self.bus.read(i, HW_ERROR, 1)[0]]
-                for i in targets:
-                    self.bus.reboot(i)
-                # wait for the restart within the link deadline; ping answers once it is back
-                for i in targets:
-                    self.bus.ping(i)
-                readings = self._io.read_state() if self._io else {}
-                for i in targets:
-                    j = self.by_id.get(i)
-                    if j is not None and j in self.position_joints and i in readings:
-                        p = min(max(readings[i].raw_position, j.min_pulses), j.max_pulses)
-                        self.bus.write(i, GOAL_POSITION, codec.int_to_le(p, 4))
-                        with self._lock:
-                            self._goals_pulses[self.position_joints.index(j)] = p
-                    self.bus.write(i, TORQUE_ENABLE, b"\x01")
-                with self._lock:
+                    targets = ids
+                    if targets is None:
+                        targets = [i for i in self.servo_ids() if self.bus.read(i, HW_ERROR, 1)[0]]
                     for i in targets:
-                        self._faults.pop(i, None)
-                        master = next((j.id for j in self.all_joints if j.shadow == i), None)
-                        if master is not None:
-                            self._faults.pop(master, None)
+                        self.bus.reboot(i)
+                    state["targets"], state["since"] = targets, time.monotonic()
+                assert isinstance(targets, list)
+                for i in targets:
+                    try:
+                        self.bus.ping(i)
+                    except (NoReply, DxlLinkError, ServoError) as e:
+                        if isinstance(e, LinkLost):
+                            raise
+                        waited = time.monotonic() - float(state["since"])  # type: ignore[arg-type]
+                        if waited > reboot_timeout:
+                            goal.fail(
+                                f"servo id {i} ({self.name_of.get(i, i)}) did not come back "
+                                f"within {reboot_timeout:.1f} s after reboot: {e}"
+                            )
+                            return True
+                        return False
+                self._restore_after_reboot(targets)
                 goal.succeed(tuple(self.name_of.get(i, str(i)) for i in targets))
+            except LinkLost:
+                raise
             except DynamixelError as e:
                 goal.fail(f"reboot failed: {e}")
+            return True
 
         self._request(work)
         return goal
 
-    def _request(self, fn: Callable[[], None]) -> None:
+    def _hold_request(self) -> bool:
+        self._hold_present()
+        return True
+
+    def _restore_after_reboot(self, targets: list[int]) -> None:
+        assert self._io is not None
+        readings = self._io.read_state()
+        for i in targets:
+            j = self.by_id.get(i)
+            if j is not None and j in self.position_joints and i in readings:
+                p = min(max(readings[i].raw_position, j.min_pulses), j.max_pulses)
+                self.bus.write(i, GOAL_POSITION, codec.int_to_le(p, 4))
+                with self._lock:
+                    self._goals_pulses[self.position_joints.index(j)] = p
+            self.bus.write(i, TORQUE_ENABLE, b"\x01")
+        with self._lock:
+            for i in targets:
+                self._faults.pop(i, None)
+                master = next((j.id for j in self.all_joints if j.shadow == i), None)
+                if master is not None:
+                    self._faults.pop(master, None)
+
+    def _request(self, fn: Callable[[], bool]) -> None:
+        """Queue ``fn`` for the I/O thread; it runs once per cycle until it returns True."""
         with self._lock:
             self._requests.append(fn)
 
@@ -802,8 +835,10 @@ class WX250s:
         assert self._io is not None
         with self._lock:
             reqs, self._requests = self._requests, []
-        for fn in reqs:
-            fn()
+        unfinished = [fn for fn in reqs if not fn()]
+        if unfinished:
+            with self._lock:
+                self._requests[:0] = unfinished
         now = self.clock.now()
         self._advance_trajectory(now)
         with self._lock:

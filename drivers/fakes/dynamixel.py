@@ -29,6 +29,7 @@ Fault switches (attributes or methods on :class:`FakeDxlBus`):
 * ``corrupt_instructions``: how many of the next instructions arrive corrupted; the servo
   answers with error 3 if ``crc_error_reply`` is True, else stays silent (which one real
   X-series firmware does is unconfirmed, so the driver is tested both ways);
+* ``reboot_time``: seconds a servo stays silent while it restarts after a Reboot;
 * Bus Watchdog: armed by writing address 98; expires after that many 20 ms without an
   instruction (or at once with :meth:`FakeDxlBus.expire_watchdog`).
 * and the :class:`~mmexec.drivers.fakes.pty.PtyDevice` switches: ``silent``, ``unplug()``, ``inject()``.
@@ -85,6 +86,7 @@ class FakeServo:
         self.present = True
         self.stops = stops
         self.obstacle: int | None = None
+        self.booting_until = 0.0  # time.monotonic() until which a rebooting servo is silent
         self._obstacle_dir = 0
         self._factory_id = dxl_id
         self.mem = bytearray(_MEM_SIZE)
@@ -368,6 +370,7 @@ class FakeDxlBus(PtyDevice):
         self.corrupt_instructions = 0
         self.corrupt_replies = 0
         self.truncate_replies = 0
+        self.reboot_time = 0.0  # s a servo stays silent while restarting after Reboot
         self.goal_writes = 0  # packets that wrote Goal Position / Goal PWM to a servo
         self.instructions: list[tuple[int, int]] = []  # (id, instruction) received, bounded
         self._parser = codec.PacketParser()
@@ -383,8 +386,9 @@ class FakeDxlBus(PtyDevice):
     def _addressed(self, dxl_id: int) -> list[tuple[FakeServo, bool]]:
         """Servos that execute an instruction to ``dxl_id``: (servo, replies?)."""
         out = []
+        now = time.monotonic()
         for s in self.servos:
-            if not s.present:
+            if not s.present or s.booting_until > now:
                 continue
             if dxl_id == BROADCAST_ID:
                 out.append((s, False))
@@ -520,6 +524,7 @@ class FakeDxlBus(PtyDevice):
             if replies and s.get("status_return_level") >= 2:
                 self._reply(s, 0)
             s.reboot(now)
+            s.booting_until = now + self.reboot_time
 
     def _factory_reset(self, p: Packet, now: float) -> None:
         option = p.params[0] if p.params else 0xFF

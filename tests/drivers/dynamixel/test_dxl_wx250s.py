@@ -322,3 +322,31 @@ def test_close_holds_and_leaves_no_threads(fake: FakeDxlBus) -> None:
     assert threading.active_count() == before
     assert fake.servo(1).torque  # holding, torque on
     dev.close()  # idempotent
+
+
+def test_stop_without_goal_holds(arm: WX250s, fake: FakeDxlBus) -> None:
+    arm.arm.stop()
+    time.sleep(0.05)
+    assert arm.arm.state().positions == pytest.approx((0.0, -1.80, 1.55, 0.0, 0.8, 0.0), abs=2e-3)
+
+
+@pytest.mark.parametrize("boot_s, ok", [(0.15, True), (5.0, False)])
+def test_reboot_waits_for_the_servo_to_restart(fake: FakeDxlBus, boot_s: float, ok: bool) -> None:
+    dev = WX250s(cfg(fake.port, reboot_timeout=0.4))
+    dev.connect()
+    try:
+        fake.inject_hardware_error(8, "overload")
+        time.sleep(0.05)
+        fake.reboot_time = boot_s
+        r = dev.reboot("wrist_rotate")
+        wait(r, 2.0)
+        if ok:
+            assert r.state is GoalState.SUCCEEDED and dev.faults == {}
+            assert fake.servo(8).torque
+        else:
+            assert r.state is GoalState.FAILED
+            assert (
+                "servo id 8 (wrist_rotate) did not come back within 0.4 s after reboot" in r.reason
+            )
+    finally:
+        dev.close()
