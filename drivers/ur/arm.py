@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-
 from mmexec.drivers.interfaces import (
     Arm,
     CapabilityError,
@@ -53,9 +52,9 @@ from mmexec.drivers.interfaces import (
 from mmexec.drivers.ur import model as urmodel
 
 __all__ = [
-    "MonotonicClock",
     "RECEIVE_VARIABLES",
     "RTDE_PORT",
+    "MonotonicClock",
     "URArm",
     "URArmConfig",
     "URConnectionError",

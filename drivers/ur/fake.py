@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
 from mmexec.drivers.interfaces import Clock
 from mmexec.drivers.ur import model as urmodel
 
@@ -319,7 +318,7 @@ class _FakeInterface:
         self._session = controller._connect(host)
         self._closed = False
 
-    def isConnected(self) -> bool:  # noqa: N802 - ur_rtde's name
+    def isConnected(self) -> bool:
         with self._ctrl._lock:
             return not self._closed and self._session == self._ctrl._session
 
@@ -362,43 +361,43 @@ class FakeRTDEReceive(_FakeInterface):
                 data = self._ctrl._read()
             return data[key]
 
-    def getTimestamp(self) -> float:  # noqa: N802
+    def getTimestamp(self) -> float:
         return float(self._get("timestamp"))
 
-    def getActualQ(self) -> list[float]:  # noqa: N802
+    def getActualQ(self) -> list[float]:
         return list(self._get("actual_q"))
 
-    def getActualQd(self) -> list[float]:  # noqa: N802
+    def getActualQd(self) -> list[float]:
         return list(self._get("actual_qd"))
 
-    def getTargetQ(self) -> list[float]:  # noqa: N802
+    def getTargetQ(self) -> list[float]:
         return list(self._get("target_q"))
 
-    def getActualCurrent(self) -> list[float]:  # noqa: N802
+    def getActualCurrent(self) -> list[float]:
         return list(self._get("actual_current"))
 
-    def getActualTCPPose(self) -> list[float]:  # noqa: N802
+    def getActualTCPPose(self) -> list[float]:
         return list(self._get("actual_TCP_pose"))
 
-    def getRobotMode(self) -> int:  # noqa: N802
+    def getRobotMode(self) -> int:
         return int(self._get("robot_mode"))
 
-    def getSafetyMode(self) -> int:  # noqa: N802
+    def getSafetyMode(self) -> int:
         return int(self._get("safety_mode"))
 
-    def getSafetyStatusBits(self) -> int:  # noqa: N802
+    def getSafetyStatusBits(self) -> int:
         return int(self._get("safety_status_bits"))
 
-    def getRuntimeState(self) -> int:  # noqa: N802
+    def getRuntimeState(self) -> int:
         return int(self._get("runtime_state"))
 
-    def getRobotStatus(self) -> int:  # noqa: N802
+    def getRobotStatus(self) -> int:
         return int(self._get("robot_status_bits"))
 
-    def isProtectiveStopped(self) -> bool:  # noqa: N802
+    def isProtectiveStopped(self) -> bool:
         return bool(self.getSafetyStatusBits() & (1 << 2))
 
-    def isEmergencyStopped(self) -> bool:  # noqa: N802
+    def isEmergencyStopped(self) -> bool:
         return bool(self.getSafetyStatusBits() & (1 << 7))
 
 
@@ -433,7 +432,7 @@ class FakeRTDEControl(_FakeInterface):
         return len(arg) > 0 and isinstance(arg[0], (list, tuple))
 
     # -- moves
-    def moveJ(self, q: Sequence[Any], speed: float = 1.05, acceleration: float = 1.4, asynchronous: bool = False) -> bool:  # noqa: N802
+    def moveJ(self, q: Sequence[Any], speed: float = 1.05, acceleration: float = 1.4, asynchronous: bool = False) -> bool:
         """Joint move (or path of [q(6), speed, acceleration, blend]); True when accepted/done."""
         if not self._ready():
             return False
@@ -447,7 +446,7 @@ class FakeRTDEControl(_FakeInterface):
             self._ctrl._start_profile(np.array(first[0], dtype=float), first[1], first[2], self._ctrl.clock.now())
         return True if asynchronous else self._wait_motion()
 
-    def moveL(self, pose: Sequence[Any], speed: float = 0.25, acceleration: float = 1.2, asynchronous: bool = False) -> bool:  # noqa: N802
+    def moveL(self, pose: Sequence[Any], speed: float = 0.25, acceleration: float = 1.2, asynchronous: bool = False) -> bool:
         """Tool move: IK of the target, then a joint-space move (fake simplification);
         ``speed`` [m/s] is used as the leading joint's rad/s."""
         if self._is_path(pose):
@@ -457,7 +456,7 @@ class FakeRTDEControl(_FakeInterface):
             return False
         return self.moveJ(list(q), speed, acceleration, asynchronous)
 
-    def servoJ(self, q: Sequence[float], speed: float, acceleration: float, time: float, lookahead_time: float, gain: float) -> bool:  # noqa: N802
+    def servoJ(self, q: Sequence[float], speed: float, acceleration: float, time: float, lookahead_time: float, gain: float) -> bool:
         """Stream a joint target; the arm tracks it at its speed limit until the watchdog."""
         if not self._ready() or not self._ctrl.joints_within_limits(q):
             return False
@@ -468,7 +467,7 @@ class FakeRTDEControl(_FakeInterface):
             self._ctrl._last_stream = self._ctrl.clock.now()
         return True
 
-    def speedJ(self, qd: Sequence[float], acceleration: float = 0.5, time: float = 0.0) -> bool:  # noqa: N802
+    def speedJ(self, qd: Sequence[float], acceleration: float = 0.5, time: float = 0.0) -> bool:
         if not self._ready():
             return False
         with self._ctrl._lock:
@@ -491,7 +490,7 @@ class FakeRTDEControl(_FakeInterface):
             prof = _Profile("stop", self._ctrl.clock.now(), self._ctrl._q.copy(), qd / v, 0.0, v, max(a, 1e-6))
             self._ctrl._profile, self._ctrl._mode = prof, "stop"
 
-    def stopJ(self, a: float = 2.0, asynchronous: bool = False) -> None:  # noqa: N802
+    def stopJ(self, a: float = 2.0, asynchronous: bool = False) -> None:
         """Decelerate at ``a`` [rad/s^2] to rest (returns None, like ur_rtde)."""
         if not self._ready():
             return
@@ -499,92 +498,92 @@ class FakeRTDEControl(_FakeInterface):
         if not asynchronous:
             self._wait_motion()
 
-    def stopL(self, a: float = 10.0, asynchronous: bool = False) -> None:  # noqa: N802
+    def stopL(self, a: float = 10.0, asynchronous: bool = False) -> None:
         self.stopJ(a, asynchronous)
 
-    def servoStop(self, a: float = 10.0) -> bool:  # noqa: N802
+    def servoStop(self, a: float = 10.0) -> bool:
         if not self._ready():
             return False
         self._decelerate(a)
         return True
 
-    def speedStop(self, a: float = 10.0) -> bool:  # noqa: N802
+    def speedStop(self, a: float = 10.0) -> bool:
         return self.servoStop(a)
 
-    def triggerProtectiveStop(self) -> bool:  # noqa: N802
+    def triggerProtectiveStop(self) -> bool:
         self._ctrl.protective_stop()
         return True
 
     # -- status
-    def isProgramRunning(self) -> bool:  # noqa: N802
+    def isProgramRunning(self) -> bool:
         return self.isConnected() and self._ctrl.runtime_state == 2
 
-    def isSteady(self) -> bool:  # noqa: N802
+    def isSteady(self) -> bool:
         with self._ctrl._lock:
             self._ctrl._advance()
             return self._ctrl._mode == "idle" and not np.any(self._ctrl._qd)
 
-    def getRobotStatus(self) -> int:  # noqa: N802
+    def getRobotStatus(self) -> int:
         return _STATUS_RUNNING if self._ctrl.runtime_state == 2 else _STATUS_STOPPED
 
-    def getAsyncOperationProgress(self) -> int:  # noqa: N802
+    def getAsyncOperationProgress(self) -> int:
         """Index of the path segment being executed, or -1 when no async move runs."""
         with self._ctrl._lock:
             self._ctrl._advance()
             return 0 if self._ctrl._mode == "move" else -1
 
     # -- kinematics and safety
-    def getInverseKinematics(self, x: Sequence[float], qnear: Sequence[float] = (), max_position_error: float = 1e-10, max_orientation_error: float = 1e-10) -> list[float]:  # noqa: N802
+    def getInverseKinematics(self, x: Sequence[float], qnear: Sequence[float] = (), max_position_error: float = 1e-10, max_orientation_error: float = 1e-10) -> list[float]:
         q = self._ctrl.inverse_kinematics(x, list(qnear) or None)
         if q is None:
             raise RuntimeError("getInverseKinematics: no solution found")
         return [float(v) for v in q]
 
-    def getInverseKinematicsHasSolution(self, x: Sequence[float], qnear: Sequence[float] = (), max_position_error: float = 1e-10, max_orientation_error: float = 1e-10) -> bool:  # noqa: N802
+    def getInverseKinematicsHasSolution(self, x: Sequence[float], qnear: Sequence[float] = (), max_position_error: float = 1e-10, max_orientation_error: float = 1e-10) -> bool:
         return self._ctrl.inverse_kinematics(x, list(qnear) or None) is not None
 
-    def getForwardKinematics(self, q: Sequence[float] = (), tcp_offset: Sequence[float] = ()) -> list[float]:  # noqa: N802
+    def getForwardKinematics(self, q: Sequence[float] = (), tcp_offset: Sequence[float] = ()) -> list[float]:
         with self._ctrl._lock:
             self._ctrl._advance()
             qq = list(q) if q else list(self._ctrl._q)
         return urmodel.matrix_to_pose(urmodel.forward_kinematics(qq, self._ctrl.model))
 
-    def isJointsWithinSafetyLimits(self, q: Sequence[float]) -> bool:  # noqa: N802
+    def isJointsWithinSafetyLimits(self, q: Sequence[float]) -> bool:
         return self._ctrl.joints_within_limits(q)
 
-    def isPoseWithinSafetyLimits(self, pose: Sequence[float]) -> bool:  # noqa: N802
+    def isPoseWithinSafetyLimits(self, pose: Sequence[float]) -> bool:
         return not self._ctrl.safety_refuses and self._ctrl.inverse_kinematics(pose, None) is not None
 
     # -- pacing and housekeeping
-    def initPeriod(self) -> float:  # noqa: N802
+    def initPeriod(self) -> float:
         self._period_start = time.monotonic()
         return self._period_start
 
-    def waitPeriod(self, t_cycle_start: float) -> None:  # noqa: N802
+    def waitPeriod(self, t_cycle_start: float) -> None:
         """Wait until one control period (2 ms) after ``t_cycle_start`` (real time)."""
         left = t_cycle_start + 0.002 - time.monotonic()
         if left > 0:
             threading.Event().wait(left)
 
-    def setWatchdog(self, min_frequency: float = 10.0) -> bool:  # noqa: N802
+    def setWatchdog(self, min_frequency: float = 10.0) -> bool:
         self._ctrl.servo_timeout = 1.0 / min_frequency
         return True
 
-    def kickWatchdog(self) -> bool:  # noqa: N802
+    def kickWatchdog(self) -> bool:
         with self._ctrl._lock:
             self._ctrl._last_stream = self._ctrl.clock.now()
         return True
 
-    def setTcp(self, pose: Sequence[float]) -> bool:  # noqa: N802
+    def setTcp(self, pose: Sequence[float]) -> bool:
         return self._ready()
 
-    def setPayload(self, mass: float, cog: Sequence[float] = ()) -> bool:  # noqa: N802
+    def setPayload(self, mass: float, cog: Sequence[float] = ()) -> bool:
         return self._ready()
 
-    def stopScript(self) -> None:  # noqa: N802
+    def stopScript(self) -> None:
         self._ctrl.stop_program()
 
-    def reuploadScript(self) -> bool:  # noqa: N802
+    def reuploadScript(self) -> bool:
         with self._ctrl._lock:
             if not self.isConnected():
                 return False

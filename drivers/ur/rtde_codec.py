@@ -31,15 +31,15 @@ from functools import lru_cache
 from typing import Any, NamedTuple
 
 __all__ = [
-    "ControllerVersion",
     "HEADER",
-    "NOT_FOUND",
     "IN_USE",
+    "NOT_FOUND",
+    "PROTOCOL_VERSION",
+    "TYPE_FORMATS",
+    "ControllerVersion",
     "Package",
     "PackageType",
-    "PROTOCOL_VERSION",
     "RTDECodecError",
-    "TYPE_FORMATS",
     "TextMessage",
     "decode_accepted",
     "decode_controller_version",

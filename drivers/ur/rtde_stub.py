@@ -43,7 +43,7 @@ import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import IO, Any
+from typing import IO, Any, Self
 
 from mmexec.drivers.ur import rtde_codec as codec
 from mmexec.drivers.ur.rtde_codec import PackageType
@@ -556,7 +556,7 @@ class RTDEStub:
     def running(self) -> bool:
         return self._proc is not None and self._proc.poll() is None
 
-    def __enter__(self) -> RTDEStub:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

@@ -10,12 +10,11 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from urtest_helpers import step_until, sync, wait_for
-
 from mmexec.drivers.interfaces import GoalState, JointTrajectory, ManualClock
 from mmexec.drivers.ur import model as urmodel
 from mmexec.drivers.ur.arm import URArm, URArmConfig, URConnectionError
 from mmexec.drivers.ur.fake import FakeURController
+from urtest_helpers import step_until, sync, wait_for
 
 HOME = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
 
@@ -43,7 +42,7 @@ def rig() -> Iterator[tuple[URArm, FakeURController, ManualClock]]:
 
 
 def test_move_to_takes_clock_time_and_arrives(rig: tuple[URArm, FakeURController, ManualClock]) -> None:
-    arm, ctrl, clock = rig
+    arm, _ctrl, clock = rig
     goal = arm.move_to(_q(0.5), speed_scale=1.0)
     sync(arm, clock)  # the worker has sent moveJ at t = 0
     clock.advance(0.2)
@@ -58,7 +57,7 @@ def test_move_to_takes_clock_time_and_arrives(rig: tuple[URArm, FakeURController
 
 
 def test_follow_streams_servoj_along_the_trajectory(rig: tuple[URArm, FakeURController, ManualClock]) -> None:
-    arm, ctrl, clock = rig
+    arm, _ctrl, clock = rig
     traj = JointTrajectory(arm.joint_names, (1.0, 2.0), (_q(0.3), _q(-0.3)))
     goal = arm.follow(traj)
     seen = []
@@ -76,7 +75,7 @@ def test_follow_streams_servoj_along_the_trajectory(rig: tuple[URArm, FakeURCont
 
 
 def test_cancel_decelerates_then_cancelled(rig: tuple[URArm, FakeURController, ManualClock]) -> None:
-    arm, ctrl, clock = rig
+    arm, _ctrl, clock = rig
     goal = arm.move_to(_q(1.5), speed_scale=1.0)
     for _ in range(20):
         clock.advance(0.02)
@@ -249,7 +248,7 @@ def test_connect_deadline_and_late_interface_is_disconnected() -> None:
 
 
 def test_stalled_command_fails_goal_within_its_deadline(rig: tuple[URArm, FakeURController, ManualClock]) -> None:
-    arm, ctrl, clock = rig
+    arm, ctrl, _clock = rig
     ctrl.command_delay = 5.0
     goal = arm.follow(JointTrajectory(arm.joint_names, (1.0,), (_q(0.2),)))
     t0 = time.monotonic()
@@ -276,7 +275,7 @@ def test_stop_cancels_running_goal(rig: tuple[URArm, FakeURController, ManualClo
 
 
 def test_tcp_pose_in_ros_base_link(rig: tuple[URArm, FakeURController, ManualClock]) -> None:
-    arm, ctrl, clock = rig
+    arm, _ctrl, clock = rig
     T = urmodel.forward_kinematics((0.0,) * 6)
     assert T[:3, 3] == pytest.approx([-0.8172, -0.2329, 0.0628], abs=1e-9)  # controller base
     g = arm.move_to((0.0,) * 6, speed_scale=1.0)

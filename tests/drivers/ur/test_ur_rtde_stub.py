@@ -9,13 +9,12 @@ from collections.abc import Iterator
 
 import pytest
 import rtde_receive
-from urtest_helpers import loopback_host, wait_for
-
 from mmexec.drivers.interfaces import GoalState, ManualClock
 from mmexec.drivers.ur import bringup
 from mmexec.drivers.ur.arm import MonotonicClock, URArm, URArmConfig, URConnectionError
 from mmexec.drivers.ur.fake import FakeURController
 from mmexec.drivers.ur.rtde_stub import RTDEStub
+from urtest_helpers import loopback_host, wait_for
 
 VARS = ["timestamp", "actual_q", "robot_mode", "safety_mode", "safety_status_bits", "runtime_state"]
 
