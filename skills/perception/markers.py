@@ -31,8 +31,10 @@ __all__ = [
     "MarkerDetection",
     "MarkerDetector",
     "MarkerObservation",
+    "depth_plane_normal",
     "estimate_marker_pose",
     "marker_object_points",
+    "marker_pose_candidates",
     "observe_markers",
     "refine_pose_with_depth",
 ]
@@ -112,21 +114,66 @@ def estimate_marker_pose(
     corners: np.ndarray, intrinsics: CameraIntrinsics, length: float
 ) -> tuple[np.ndarray, float]:
     """``(T_camera_marker, rms_reprojection_error_px)`` from the 4 corner pixels with
-    ``SOLVEPNP_IPPE_SQUARE``."""
+    ``SOLVEPNP_IPPE_SQUARE`` (the solution with the smaller reprojection error)."""
+    sols = marker_pose_candidates(corners, intrinsics, length)
+    return sols[0]
+
+
+def marker_pose_candidates(
+    corners: np.ndarray, intrinsics: CameraIntrinsics, length: float
+) -> list[tuple[np.ndarray, float]]:
+    """Both IPPE solutions ``(T_camera_marker, rms_px)``, best reprojection first. A small
+    or far marker seen nearly head-on has two poses mirrored about the line of sight with
+    similar errors (the planar-pose ambiguity); depth can tell them apart."""
     K = intrinsics.matrix()
     dist = np.asarray(intrinsics.dist, dtype=np.float64)
     obj = marker_object_points(length)
     img = np.asarray(corners, dtype=np.float64).reshape(4, 1, 2)
-    ok, rvec, tvec = cv2.solvePnP(obj, img, K, dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
-    if not ok:
+    n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, K, dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
+    if not n:
         raise ValueError("solvePnP failed on the marker corners")
-    R, _ = cv2.Rodrigues(rvec)
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = tvec.ravel()
-    proj, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
-    err = float(np.sqrt(np.mean(np.sum((proj.reshape(4, 2) - img.reshape(4, 2)) ** 2, axis=1))))
-    return T, err
+    out = []
+    for rvec, tvec in zip(rvecs, tvecs):
+        R, _ = cv2.Rodrigues(rvec)
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = np.asarray(tvec).ravel()
+        proj, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
+        err = float(np.sqrt(np.mean(np.sum((proj.reshape(4, 2) - img.reshape(4, 2)) ** 2, axis=1))))
+        out.append((T, err))
+    out.sort(key=lambda x: x[1])
+    return out
+
+
+def depth_plane_normal(
+    corners: np.ndarray, depth: np.ndarray, intrinsics: CameraIntrinsics, *, min_points: int = 30
+) -> np.ndarray | None:
+    """Unit normal (camera frame, pointing towards the camera) of the plane fitted by SVD to
+    the depth points inside the marker quad, or None with too few valid depths."""
+    quad = np.asarray(corners, dtype=np.float64).reshape(4, 2)
+    c = quad.mean(axis=0)
+    inner = c + 0.9 * (quad - c)
+    h, w = depth.shape[:2]
+    x0, y0 = np.maximum(np.floor(inner.min(axis=0)).astype(int), 0)
+    x1, y1 = np.minimum(np.ceil(inner.max(axis=0)).astype(int), (w - 1, h - 1))
+    if x1 <= x0 or y1 <= y0:
+        return None
+    mask = np.zeros((y1 - y0 + 1, x1 - x0 + 1), np.uint8)
+    cv2.fillConvexPoly(mask, np.round(inner - (x0, y0)).astype(np.int32), 1)
+    patch = depth[y0 : y1 + 1, x0 : x1 + 1]
+    ok = (mask > 0) & np.isfinite(patch) & (patch > 0)
+    if int(ok.sum()) < min_points:
+        return None
+    vs, us = np.nonzero(ok)
+    z = patch[ok].astype(np.float64)
+    X = (us + x0 - intrinsics.cx) / intrinsics.fx * z
+    Y = (vs + y0 - intrinsics.cy) / intrinsics.fy * z
+    P = np.stack([X, Y, z], axis=1)
+    _, _, Vt = np.linalg.svd(P - P.mean(axis=0), full_matrices=False)
+    nrm = Vt[2]
+    if nrm[2] > 0:  # towards the camera: negative optical z
+        nrm = -nrm
+    return nrm
 
 
 def refine_pose_with_depth(
@@ -291,10 +338,16 @@ def observe_markers(
         if ids is not None and d.id not in ids:
             continue
         try:
-            T_cm, err = estimate_marker_pose(d.corners, frame.intrinsics, length)
+            cands = marker_pose_candidates(d.corners, frame.intrinsics, length)
         except ValueError as e:
             log.warning("marker %d: %s", d.id, e)
             continue
+        T_cm, err = cands[0]
+        if frame.depth is not None and cfg.depth_refine and len(cands) > 1:
+            # resolve the planar ambiguity with the depth plane's normal
+            nrm = depth_plane_normal(d.corners, frame.depth, frame.intrinsics)
+            if nrm is not None:
+                T_cm, err = max(cands, key=lambda c: float(np.dot(c[0][:3, 2], nrm)))
         refined = False
         if cfg.depth_refine and frame.depth is not None:
             T_cm, refined = refine_pose_with_depth(
