@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import enum
+import functools
 import types
 import typing
 from collections.abc import Iterable, Mapping
@@ -52,9 +53,9 @@ MAX_ALIASES = 256
 MAX_NODES = 200_000
 
 
-@dataclass(frozen=True)
-class Mark:
-    """A position in a file: 1-based line and column."""
+class Mark(typing.NamedTuple):
+    """A position in a file: 1-based line and column (a tuple: cheap to make by the
+    thousand while loading)."""
 
     file: str
     line: int
@@ -145,6 +146,11 @@ class _Constructor(yaml.constructor.SafeConstructor):
     pass
 
 
+# libyaml's C parser when PyYAML was built with it (about 15x faster on large missions);
+# it produces the same events, nodes and marks as the pure-Python SafeLoader.
+_Loader: type = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
 def _utf8_error_mark(file: str, data: bytes, pos: int) -> Mark:
     before = data[:pos]
     line = before.count(b"\n") + 1
@@ -197,119 +203,184 @@ def load_yaml_text(text: str, name: str = "<string>") -> Any:
             )
         if i > 4096:
             break
-    # Pass 1: the event stream (iterative, cheap) to bound depth, aliases and size
-    # before anything recursive runs.
-    depth = aliases = events = docs = 0
     try:
-        for ev in yaml.parse(text, Loader=yaml.SafeLoader):
-            events += 1
-            if isinstance(ev, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
-                depth += 1
-                if depth > MAX_DEPTH:
-                    raise InputError.at(_mark(name, ev.start_mark), f"nesting deeper than {MAX_DEPTH} levels")
-            elif isinstance(ev, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
-                depth -= 1
-            elif isinstance(ev, yaml.AliasEvent):
-                aliases += 1
-                if aliases > MAX_ALIASES:
-                    raise InputError.at(
-                        _mark(name, ev.start_mark), f"more than {MAX_ALIASES} aliases (YAML alias bomb?)"
-                    )
-            elif isinstance(ev, yaml.DocumentStartEvent):
-                docs += 1
-                if docs > 1:
-                    raise InputError.at(_mark(name, ev.start_mark), "more than one YAML document in the file")
-            if events > MAX_NODES:
-                raise InputError.at(_mark(name, ev.start_mark), f"more than {MAX_NODES} YAML nodes")
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        return _build(text, name)
     except yaml.MarkedYAMLError as e:
         m = e.problem_mark or e.context_mark
         msg = " ".join(x for x in (e.context, e.problem) if x) or "malformed YAML"
         raise InputError.at(_mark(name, m), f"malformed YAML: {msg}") from None
     except yaml.YAMLError as e:
         raise InputError.at(Mark(name, 1, 1), f"malformed YAML: {e}") from None
-    if node is None:
-        return None
-    if _expanded_size(node, {}) > MAX_NODES:
-        raise InputError.at(_mark(name, node.start_mark), f"more than {MAX_NODES} YAML nodes after alias expansion (YAML alias bomb?)")
+
+
+_STR_TAG = "tag:yaml.org,2002:str"
+_MAP_TAG = "tag:yaml.org,2002:map"
+_SEQ_TAG = "tag:yaml.org,2002:seq"
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+_IMPLICIT = yaml.resolver.Resolver.yaml_implicit_resolvers
+
+
+@functools.lru_cache(maxsize=4096)
+def _resolve_plain(value: str) -> str:
+    """The tag PyYAML's resolver gives a plain scalar (YAML 1.1 rules)."""
+    resolvers = _IMPLICIT.get(value[0] if value else "", [])
+    for tag, regexp in resolvers + _IMPLICIT.get(None, []):
+        if regexp.match(value):
+            return tag
+    return _STR_TAG
+
+
+class _Frame:
+    """A mapping or sequence being built from the event stream."""
+
+    __slots__ = ("value", "size", "key", "key_mark", "merges", "anchor")
+
+    def __init__(self, value: YDict | YList, anchor: str | None) -> None:
+        self.value = value
+        self.size = 1
+        self.key: Any = _NO_KEY
+        self.key_mark: Mark | None = None
+        self.merges: list[tuple[Any, Mark]] = []
+        self.anchor = anchor
+
+
+_NO_KEY = object()
+
+
+def _build(text: str, name: str) -> Any:
+    """Build YDict / YList / scalars straight from the parser's event stream.
+
+    One iterative pass (no recursion, so deep nesting cannot overflow the stack) that
+    bounds depth, aliases and the alias-expanded node count as it goes. Aliases share
+    the anchored value (no copy), but count their full size against :data:`MAX_NODES`.
+    """
+    ctor = _Constructor()
     problems = Problems()
-    budget = [MAX_NODES]
-    out = _convert(node, name, _Constructor(), problems, budget, {})
+    stack: list[_Frame] = []
+    anchors: dict[str, tuple[Any, int]] = {}
+    root: Any = None
+    docs = aliases = 0
+    for ev in yaml.parse(text, Loader=_Loader):
+        cls = ev.__class__
+        if cls is yaml.ScalarEvent:
+            mark = _mark(name, ev.start_mark)
+            value = _scalar_event(ev, mark, ctor, problems)
+            size = 1
+            if ev.anchor is not None:
+                anchors[ev.anchor] = (value, 1)
+        elif cls is yaml.MappingStartEvent or cls is yaml.SequenceStartEvent:
+            mark = _mark(name, ev.start_mark)
+            if len(stack) >= MAX_DEPTH:
+                raise InputError.at(mark, f"nesting deeper than {MAX_DEPTH} levels")
+            is_map = cls is yaml.MappingStartEvent
+            if ev.tag not in (None, "!", _MAP_TAG if is_map else _SEQ_TAG):
+                problems.add(mark, f"unsupported YAML tag {ev.tag!r}")
+            container: YDict | YList
+            if is_map:
+                container = YDict()
+                container.key_marks, container.value_marks = {}, {}
+            else:
+                container = YList()
+                container.item_marks = []
+            container.mark = mark
+            stack.append(_Frame(container, ev.anchor))
+            continue
+        elif cls is yaml.MappingEndEvent or cls is yaml.SequenceEndEvent:
+            frame = stack.pop()
+            value, size = frame.value, frame.size
+            mark = value.mark
+            if frame.merges:
+                _apply_merges(value, frame.merges, problems)
+            if frame.anchor is not None:
+                anchors[frame.anchor] = (value, size)
+        elif cls is yaml.AliasEvent:
+            mark = _mark(name, ev.start_mark)
+            aliases += 1
+            if aliases > MAX_ALIASES:
+                raise InputError.at(mark, f"more than {MAX_ALIASES} aliases (YAML alias bomb?)")
+            if ev.anchor not in anchors:
+                raise InputError.at(mark, f"malformed YAML: found undefined or recursive alias {ev.anchor!r}")
+            value, size = anchors[ev.anchor]
+        elif cls is yaml.DocumentStartEvent:
+            docs += 1
+            if docs > 1:
+                raise InputError.at(_mark(name, ev.start_mark), "more than one YAML document in the file")
+            continue
+        else:
+            continue
+        if not stack:
+            root = value
+            continue
+        parent = stack[-1]
+        parent.size += size
+        if parent.size > MAX_NODES:
+            raise InputError.at(mark, f"more than {MAX_NODES} YAML nodes after alias expansion (YAML alias bomb?)")
+        pv = parent.value
+        if isinstance(pv, YList):
+            pv.append(value)
+            pv.item_marks.append(mark)
+        elif parent.key is _NO_KEY:
+            if cls is not yaml.ScalarEvent and cls is not yaml.AliasEvent or isinstance(value, (dict, list)):
+                problems.add(mark, "mapping keys must be plain scalars")
+                parent.key, parent.key_mark = None, mark
+                continue
+            if cls is yaml.ScalarEvent and not ev.style and ev.value == "<<" and ev.tag is None:
+                parent.key, parent.key_mark = _MERGE_TAG, mark
+                continue
+            parent.key = value if isinstance(value, str) else str(value)
+            parent.key_mark = mark
+        else:
+            key, kmark = parent.key, parent.key_mark
+            parent.key = _NO_KEY
+            if key is None:  # a rejected (non-scalar) key: drop its value
+                continue
+            if key is _MERGE_TAG:
+                parent.merges.append((value, mark))
+                continue
+            assert kmark is not None
+            if key in pv:
+                problems.add(kmark, f"duplicate key {key!r} (first at line {pv.key_marks[key].line})")
+                continue
+            pv[key] = value
+            pv.key_marks[key] = kmark
+            pv.value_marks[key] = mark
     problems.raise_if_any()
-    return out
+    return root
 
 
-def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
-    """Node count with every alias expanded, computed in linear time (memoised)."""
-    key = id(node)
-    if key in memo:
-        return memo[key]
-    memo[key] = 1  # a cycle counts once; PyYAML's composer does not build cycles anyway
-    total = 1
-    if isinstance(node, yaml.MappingNode):
-        for k, v in node.value:
-            total += _expanded_size(k, memo) + _expanded_size(v, memo)
-    elif isinstance(node, yaml.SequenceNode):
-        for item in node.value:
-            total += _expanded_size(item, memo)
-    memo[key] = min(total, 1 << 62)
-    return memo[key]
-
-
-def _convert(
-    node: yaml.Node, name: str, ctor: _Constructor, problems: Problems, budget: list[int], seen: dict[int, Any]
-) -> Any:
-    budget[0] -= 1
-    if budget[0] < 0:
-        raise InputError.at(_mark(name, node.start_mark), f"more than {MAX_NODES} YAML nodes after alias expansion")
-    mark = _mark(name, node.start_mark)
-    if id(node) in seen:  # an alias: share the already-built value (no re-expansion)
-        return seen[id(node)]
-    if isinstance(node, yaml.MappingNode):
-        if node.tag not in ("tag:yaml.org,2002:map",):
-            problems.add(mark, f"unsupported YAML tag {node.tag!r}")
-        d = YDict()
-        d.mark, d.key_marks, d.value_marks = mark, {}, {}
-        seen[id(node)] = d
-        try:
-            ctor.flatten_mapping(node)  # merge keys (<<)
-        except yaml.MarkedYAMLError as e:
-            problems.add(_mark(name, e.problem_mark), f"malformed YAML: {e.problem}")
-        for knode, vnode in node.value:
-            kmark = _mark(name, knode.start_mark)
-            if not isinstance(knode, yaml.ScalarNode):
-                problems.add(kmark, "mapping keys must be plain scalars")
+def _apply_merges(target: YDict, merges: list[tuple[Any, Mark]], problems: Problems) -> None:
+    """YAML merge keys (``<<: *base`` or ``<<: [*a, *b]``): explicit keys win, then the
+    first merged mapping that has the key."""
+    for value, mark in merges:
+        sources = value if isinstance(value, list) else [value]
+        for src in sources:
+            if not isinstance(src, YDict):
+                problems.add(mark, "a merge key (<<) expects a mapping or a list of mappings")
                 continue
-            key = _scalar(knode, name, ctor, problems)
-            if not isinstance(key, str):
-                key = str(key)
-            if key in d:
-                problems.add(kmark, f"duplicate key {key!r} (first at line {d.key_marks[key].line})")
-                continue
-            d[key] = _convert(vnode, name, ctor, problems, budget, seen)
-            d.key_marks[key] = kmark
-            d.value_marks[key] = _mark(name, vnode.start_mark)
-        return d
-    if isinstance(node, yaml.SequenceNode):
-        if node.tag != "tag:yaml.org,2002:seq":
-            problems.add(mark, f"unsupported YAML tag {node.tag!r}")
-        lst = YList()
-        lst.mark, lst.item_marks = mark, []
-        seen[id(node)] = lst
-        for item in node.value:
-            lst.append(_convert(item, name, ctor, problems, budget, seen))
-            lst.item_marks.append(_mark(name, item.start_mark))
-        return lst
-    return _scalar(node, name, ctor, problems)
+            for k, v in src.items():
+                if k not in target:
+                    target[k] = v
+                    target.key_marks[k] = src.key_mark(k)
+                    target.value_marks[k] = src.value_mark(k)
 
 
-def _scalar(node: yaml.Node, name: str, ctor: _Constructor, problems: Problems) -> Any:
+def _scalar_event(ev: yaml.ScalarEvent, mark: Mark, ctor: _Constructor, problems: Problems) -> Any:
+    tag = ev.tag
+    if tag is None or tag == "!":
+        if ev.style or tag == "!" or not ev.implicit[0]:
+            return ev.value
+        tag = _resolve_plain(ev.value)
+        if tag == _STR_TAG or tag == _MERGE_TAG:  # "<<" is handled by the mapping builder
+            return ev.value
+    elif tag == _STR_TAG:
+        return ev.value
+    node = yaml.ScalarNode(tag, ev.value, ev.start_mark, ev.end_mark, ev.style)
     try:
         return ctor.construct_object(node, deep=True)
     except yaml.constructor.ConstructorError as e:
-        problems.add(_mark(name, node.start_mark), f"unsupported YAML value: {e.problem}")
+        problems.add(mark, f"unsupported YAML value: {e.problem}")
     except (ValueError, OverflowError) as e:
-        problems.add(_mark(name, node.start_mark), f"bad scalar value: {e}")
+        problems.add(mark, f"bad scalar value: {e}")
     return None
 
 

@@ -69,10 +69,11 @@ EXIT_INTERRUPTED = 130
 Status = py_trees.common.Status
 
 
-@dataclass(frozen=True)
 class ArgMark(Mark):
     """Where a command-line value came from, printed as ``--request #2`` (``line`` is the
     occurrence number; ``line`` 0 prints the name alone)."""
+
+    __slots__ = ()
 
     def __str__(self) -> str:
         return f"{self.file} #{self.line}" if self.line else self.file
