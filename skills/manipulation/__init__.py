@@ -5,9 +5,20 @@ docstring says otherwise; m, rad, s."""
 
 from __future__ import annotations
 
-from mmexec.skills.manipulation.grasp import GraspPoses, PlacePoses, grasp_poses, place_poses, tool_rotation_in_marker
+from mmexec.skills.manipulation.grasp import (
+    GraspPoses,
+    PlacePoses,
+    grasp_poses,
+    place_poses,
+    tool_rotation_in_marker,
+)
 from mmexec.skills.manipulation.kinematics import ArmKinematics, ur5e, wx250s
-from mmexec.skills.manipulation.planner import ArmPlanner, PlannerConfig, PlanResult, time_parametrize
+from mmexec.skills.manipulation.planner import (
+    ArmPlanner,
+    PlannerConfig,
+    PlanResult,
+    time_parametrize,
+)
 from mmexec.skills.manipulation.scene import ArmModel, PlanningScene
 
 __all__ = [

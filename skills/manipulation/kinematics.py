@@ -24,7 +24,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
 from mmexec.drivers.interfaces import JointLimit
 
 __all__ = [

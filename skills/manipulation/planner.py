@@ -22,7 +22,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from mmexec.drivers.interfaces import JointLimit, JointTrajectory
 from mmexec.skills.manipulation.kinematics import ArmKinematics
 from mmexec.skills.manipulation.scene import PlanningScene

@@ -28,10 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
-
 from mmexec.drivers.interfaces import SceneBox
 
-__all__ = ["ArmModel", "PlanningScene", "SceneItem", "pose_to_pb", "pb_to_pose"]
+__all__ = ["ArmModel", "PlanningScene", "SceneItem", "pb_to_pose", "pose_to_pb"]
 
 log = logging.getLogger(__name__)
 

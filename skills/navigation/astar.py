@@ -11,7 +11,6 @@ import logging
 import math
 
 import numpy as np
-
 from mmexec.skills.navigation.grid import CostMap, cell_to_world, world_to_cell
 
 __all__ = ["line_is_free", "path_length", "plan_path", "simplify_path"]
@@ -86,7 +85,7 @@ def plan_path(
     def heur(i: int) -> float:
         dr = abs(i // w - gr)
         dc = abs(i % w - gc)
-        return dr + dc + k * (dr if dr < dc else dc)
+        return dr + dc + k * (min(dc, dr))
 
     openq: list[tuple[float, float, int]] = [(heur(s), 0.0, s)]
     push, pop = heapq.heappush, heapq.heappop

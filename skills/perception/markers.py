@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-
 from mmexec.drivers.interfaces import CameraFrame, CameraIntrinsics
 
 __all__ = [

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-
 from mmexec.drivers.interfaces import CameraIntrinsics
 
 __all__ = ["SyntheticView", "look_at_marker", "render_marker_view"]

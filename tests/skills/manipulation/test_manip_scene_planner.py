@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-
 from mmexec.drivers.interfaces import SceneBox
 from mmexec.skills.manipulation.grasp import grasp_poses, place_poses, tool_rotation_in_marker
 from mmexec.skills.manipulation.kinematics import wx250s
@@ -118,12 +117,11 @@ def test_plan_around_obstacle_and_failure_reasons(scene):
 
 def _check_limits(tr, kin, q0, scale):
     prev_t, prev_q = 0.0, np.asarray(q0)
-    prev_v = np.zeros(kin.dof)
     vmax = np.array([lim.velocity for lim in kin.limits]) * scale
     for t, q in zip(tr.times, tr.positions):
         v = (np.asarray(q) - prev_q) / (t - prev_t)
         assert np.all(np.abs(v) <= vmax + 1e-6)
-        prev_t, prev_q, prev_v = t, np.asarray(q), v
+        prev_t, prev_q = t, np.asarray(q)
 
 
 def test_time_parametrization_respects_velocity_and_acceleration():

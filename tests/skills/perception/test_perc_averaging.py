@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-
 from mmexec.skills.perception.averaging import (
     MarkerPoseEstimator,
     average_poses,

@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-
 from mmexec.drivers.interfaces import CameraFrame, CameraIntrinsics
 from mmexec.skills.perception.averaging import rotation_angle
 from mmexec.skills.perception.markers import (
