@@ -419,6 +419,14 @@ class RobotiqDevice(abc.ABC):
 
     # ------------------------------------------------------------------ I/O thread
     def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as e:  # noqa: BLE001 - the thread's last resort: fail, never hang
+            log.exception("%s: I/O thread failed", self.where)
+            err = RobotiqLinkLost(self.where, f"I/O thread failed: {type(e).__name__}: {e}")
+            self._on_link_problem(LinkState.LOST, err, fail_now=True)
+
+    def _loop(self) -> None:
         period = self.settings.poll_period
         while not self._stop_evt.is_set():
             with self._lock:

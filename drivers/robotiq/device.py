@@ -13,6 +13,7 @@ exception frames and ignores corrupt requests, so a bad request shows up as a ti
 from __future__ import annotations
 
 import logging
+import termios
 import threading
 import time
 from dataclasses import dataclass
@@ -117,6 +118,11 @@ class RobotiqModbus(RobotiqDevice):
                 raise RobotiqLinkLost(port, f"robotiq: link lost ({e.detail})") from e
             except LinkError as e:
                 raise RobotiqLinkError(port, f"robotiq: {e.detail}") from e
+            except (OSError, termios.error) as e:
+                # once the device is gone pyserial can also fail outside SerialTransport's
+                # translation: tcflush raises termios.error, setting the read timeout raises
+                # SerialException "Could not configure port"
+                raise RobotiqLinkLost(port, f"robotiq: link lost ({e})") from e
             finally:
                 self._last_io = time.monotonic()
 

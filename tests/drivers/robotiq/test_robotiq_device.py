@@ -336,3 +336,27 @@ def test_state_stamps_use_injected_clock(fake: FakeRobotiq) -> None:
         assert wait_for(lambda: dev.state().stamp == 105.0, 1.0)
     finally:
         dev.close()
+
+
+def test_unexpected_io_error_fails_goals_instead_of_hanging(fake: FakeRobotiq) -> None:
+    class Broken(RobotiqModbus):
+        broken = False
+
+        def _read_status(self) -> codec.Status:
+            if self.broken:
+                raise RuntimeError("driver bug")
+            return super()._read_status()
+
+    dev = Broken(ModbusSettings(fake.port, latency=0.03))
+    g = RobotiqGripper(dev)
+    try:
+        act = g.setup()
+        assert act is not None and finish(act) is GoalState.SUCCEEDED
+        fake.model.time_scale = 1.0
+        goal = g.close(speed=0.02)
+        dev.broken = True
+        assert finish(goal, 1.0) is GoalState.FAILED
+        assert "I/O thread failed: RuntimeError: driver bug" in goal.reason
+        assert dev.link_state is LinkState.LOST
+    finally:
+        g.disconnect()
