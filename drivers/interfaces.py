@@ -22,6 +22,7 @@ import abc
 import enum
 import math
 import threading
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,9 +38,9 @@ __all__ = [
     "CameraIntrinsics",
     "CapabilityError",
     "Clock",
-    "GraspState",
     "Goal",
     "GoalState",
+    "GraspState",
     "Gripper",
     "GripperState",
     "JointLimit",
@@ -48,6 +49,7 @@ __all__ = [
     "LaserScan",
     "Lidar",
     "ManualClock",
+    "MonotonicClock",
     "OccupancyGrid",
     "Pose2D",
     "Robot",
@@ -72,6 +74,13 @@ class Clock(abc.ABC):
     @abc.abstractmethod
     def now(self) -> float:
         """Seconds since an arbitrary epoch fixed for the run (monotonic, never jumps back)."""
+
+
+class MonotonicClock(Clock):
+    """The real robot's clock: ``time.monotonic()`` seconds (never jumps with NTP)."""
+
+    def now(self) -> float:
+        return time.monotonic()
 
 
 class ManualClock(Clock):
@@ -612,7 +621,7 @@ class Robot(abc.ABC):
                 continue
             try:
                 cap.stop()
-            except Exception:  # noqa: BLE001 - best effort on the way down, logged
+            except Exception:
                 import logging
 
                 logging.getLogger(__name__).exception("safe_stop: %s.stop() failed", cap)

@@ -37,14 +37,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
 from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, did_you_mean
-from mmexec.drivers.interfaces import Clock, OccupancyGrid, Pose2D, Robot, SceneBox
+from mmexec.drivers.interfaces import MonotonicClock, OccupancyGrid, Pose2D, Robot, SceneBox
 
 __all__ = [
     "DEVICE_KINDS",
     "DeviceUnavailable",
-    "MonotonicClock",
     "RealRobot",
     "build",
     "check",
@@ -53,15 +51,6 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-
-class MonotonicClock(Clock):
-    """Wall-clock seconds since construction, from ``time.monotonic()`` (never jumps)."""
-
-    def __init__(self) -> None:
-        self._t0 = time.monotonic()
-
-    def now(self) -> float:
-        return time.monotonic() - self._t0
 
 
 class DeviceUnavailable(InputError):
@@ -114,7 +103,7 @@ class RealRobot(Robot):
                 continue
             try:
                 cap.stop()
-            except Exception:  # noqa: BLE001 - best effort on the way down, logged
+            except Exception:
                 log.exception("safe_stop: %s.stop() failed", label)
 
     def close(self) -> None:
@@ -124,7 +113,7 @@ class RealRobot(Robot):
         for label, closer in reversed(closers):
             try:
                 closer()
-            except Exception:  # noqa: BLE001 - keep closing the others, logged
+            except Exception:
                 log.exception("close: %s failed", label)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import errno
 import logging
 import os
+import termios
 import time
 from dataclasses import dataclass
 
@@ -28,6 +29,10 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+#: what pyserial raises when the device vanishes: its own exception, plain OS errors,
+#: and termios.error from reconfiguring a port whose tty is gone.
+_PORT_ERRORS = (OSError, serial.SerialException, termios.error)
 
 
 class LinkError(IOError):
@@ -116,7 +121,7 @@ class SerialTransport:
         if ser is not None:
             try:
                 ser.close()
-            except (OSError, serial.SerialException) as e:
+            except _PORT_ERRORS as e:
                 log.warning("%s: error while closing: %s", self.port, e)
 
     def _require(self) -> serial.Serial:
@@ -128,7 +133,7 @@ class SerialTransport:
         ser = self._require()
         try:
             ser.write(data)
-        except (OSError, serial.SerialException) as e:
+        except _PORT_ERRORS as e:
             raise LinkClosed(self.port, f"write failed: {e}") from e
 
     def read_available(self, max_bytes: int = 4096) -> bytes:
@@ -137,7 +142,7 @@ class SerialTransport:
         try:
             n = ser.in_waiting
             return ser.read(min(n, max_bytes)) if n else b""
-        except (OSError, serial.SerialException) as e:
+        except _PORT_ERRORS as e:
             raise LinkClosed(self.port, f"read failed: {e}") from e
 
     def read(self, n: int, deadline: float) -> bytes:
@@ -148,13 +153,16 @@ class SerialTransport:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise LinkTimeout(self.port, f"no answer within the deadline ({len(buf)} of {n} bytes)")
-            ser.timeout = min(remaining, 0.05)
             try:
+                ser.timeout = min(remaining, 0.05)
                 chunk = ser.read(n - len(buf))
-            except (OSError, serial.SerialException) as e:
+            except _PORT_ERRORS as e:
                 raise LinkClosed(self.port, f"read failed: {e}") from e
             buf += chunk
-        ser.timeout = 0
+        try:
+            ser.timeout = 0
+        except _PORT_ERRORS as e:
+            raise LinkClosed(self.port, f"read failed: {e}") from e
         return bytes(buf)
 
     def wait_readable(self, timeout: float) -> bytes:
@@ -171,14 +179,14 @@ class SerialTransport:
                 return b""
             rest = ser.read(ser.in_waiting or 0)
             return first + rest
-        except (OSError, serial.SerialException) as e:
+        except _PORT_ERRORS as e:
             raise LinkClosed(self.port, f"read failed: {e}") from e
 
     def reset_input(self) -> None:
         ser = self._require()
         try:
             ser.reset_input_buffer()
-        except (OSError, serial.SerialException) as e:
+        except _PORT_ERRORS as e:
             raise LinkClosed(self.port, f"flush failed: {e}") from e
 
     def __enter__(self) -> SerialTransport:

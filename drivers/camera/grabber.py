@@ -14,23 +14,17 @@ from __future__ import annotations
 import abc
 import logging
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-
 from mmexec.drivers.camera.errors import CameraError
-from mmexec.drivers.interfaces import Camera, CameraFrame, CameraIntrinsics, Clock
+from mmexec.drivers.interfaces import Camera, CameraFrame, CameraIntrinsics, Clock, MonotonicClock
 
 __all__ = ["CameraHealth", "GrabbingCamera"]
 
 log = logging.getLogger(__name__)
 
-
-class _Monotonic(Clock):
-    def now(self) -> float:
-        return time.monotonic()
 
 
 @dataclass(frozen=True)
@@ -54,7 +48,7 @@ class GrabbingCamera(Camera):
         self._intrinsics = intrinsics
         self._T_base_camera = np.array(T_base_camera, dtype=float)
         self.frame_timeout = frame_timeout
-        self.clock: Clock = clock or _Monotonic()
+        self.clock: Clock = clock or MonotonicClock()
         self._base_pose = base_pose
         self._lock = threading.Lock()
         self._latest: CameraFrame | None = None

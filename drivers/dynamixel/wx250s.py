@@ -77,6 +77,7 @@ from mmexec.drivers.interfaces import (
     JointLimit,
     JointState,
     JointTrajectory,
+    MonotonicClock,
 )
 
 __all__ = [
@@ -306,10 +307,6 @@ def _detail(e: Exception | None) -> str:
     return str(getattr(e, "detail", e))
 
 
-class _MonotonicClock(Clock):
-    def now(self) -> float:
-        return time.monotonic()
-
 
 # --------------------------------------------------------------------------- device
 
@@ -341,7 +338,7 @@ class WX250s:
         self, config: WX250sConfig, *, clock: Clock | None = None, bus: DxlBus | None = None
     ) -> None:
         self.config = config
-        self.clock: Clock = clock if clock is not None else _MonotonicClock()
+        self.clock: Clock = clock if clock is not None else MonotonicClock()
         self.bus = (
             bus
             if bus is not None

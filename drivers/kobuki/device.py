@@ -33,11 +33,12 @@ import threading
 import time
 from dataclasses import dataclass
 
-from mmexec.drivers.interfaces import BaseState, Clock, Pose2D
+from mmexec.drivers.interfaces import BaseState, Clock, MonotonicClock, Pose2D
 from mmexec.drivers.kobuki import codec as k
 from mmexec.drivers.transport import LinkError, SerialSettings, SerialTransport
 
 __all__ = [
+    "SUPPORTED_FIRMWARE_MAJOR",
     "KobukiConfig",
     "KobukiCorruptFrames",
     "KobukiDevice",
@@ -48,7 +49,6 @@ __all__ = [
     "KobukiNotConnected",
     "KobukiTimeout",
     "LinkState",
-    "SUPPORTED_FIRMWARE_MAJOR",
 ]
 
 log = logging.getLogger(__name__)
@@ -165,10 +165,6 @@ class LinkState(enum.Enum):
     LOST = "lost"
 
 
-class _MonotonicClock(Clock):
-    def now(self) -> float:
-        return time.monotonic()
-
 
 # --------------------------------------------------------------------------- device
 
@@ -181,7 +177,7 @@ class KobukiDevice:
         if problems:
             raise ValueError(f"kobuki on {config.port}: " + "; ".join(problems))
         self.config = config
-        self.clock: Clock = clock or _MonotonicClock()
+        self.clock: Clock = clock or MonotonicClock()
         self._transport = SerialTransport(SerialSettings(config.port, config.baudrate))
         self._lock = threading.RLock()
         self._thread: threading.Thread | None = None

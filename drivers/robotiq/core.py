@@ -25,7 +25,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from mmexec.drivers.interfaces import Clock, Goal, GraspState, GripperState
+from mmexec.drivers.interfaces import Clock, Goal, GraspState, GripperState, MonotonicClock
 from mmexec.drivers.robotiq import codec
 from mmexec.drivers.robotiq.codec import Command, Status
 from mmexec.drivers.robotiq.errors import (
@@ -37,16 +37,10 @@ from mmexec.drivers.robotiq.errors import (
     fault_error,
 )
 
-__all__ = ["DeviceSettings", "LinkState", "MonotonicClock", "RobotiqDevice"]
+__all__ = ["DeviceSettings", "LinkState", "RobotiqDevice"]
 
 log = logging.getLogger(__name__)
 
-
-class MonotonicClock(Clock):
-    """Wall-clock-rate :class:`Clock` from ``time.monotonic()`` (the robot's clock)."""
-
-    def now(self) -> float:
-        return time.monotonic()
 
 
 class LinkState(enum.Enum):
@@ -421,7 +415,7 @@ class RobotiqDevice(abc.ABC):
     def _run(self) -> None:
         try:
             self._loop()
-        except Exception as e:  # noqa: BLE001 - the thread's last resort: fail, never hang
+        except Exception as e:
             log.exception("%s: I/O thread failed", self.where)
             err = RobotiqLinkLost(self.where, f"I/O thread failed: {type(e).__name__}: {e}")
             self._on_link_problem(LinkState.LOST, err, fail_now=True)

@@ -48,13 +48,13 @@ from mmexec.drivers.interfaces import (
     JointLimit,
     JointState,
     JointTrajectory,
+    MonotonicClock,
 )
 from mmexec.drivers.ur import model as urmodel
 
 __all__ = [
     "RECEIVE_VARIABLES",
     "RTDE_PORT",
-    "MonotonicClock",
     "URArm",
     "URArmConfig",
     "URConnectionError",
@@ -102,12 +102,6 @@ class URConnectionError(CapabilityError):
         super().__init__(message)
         self.detail = detail or message
 
-
-class MonotonicClock(Clock):
-    """The wall clock for the real robot: ``time.monotonic()`` seconds."""
-
-    def now(self) -> float:
-        return time.monotonic()
 
 
 @dataclass(frozen=True)
