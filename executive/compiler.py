@@ -31,7 +31,17 @@ from py_trees.common import Status
 from mmexec.config.yamlload import InputError, Mark, Problems, did_you_mean, load_yaml_bytes, load_yaml_text
 from mmexec.executive import nodes as N
 from mmexec.executive.context import ExecContext
-from mmexec.executive.schema import FAILURE_KEYS, TYPE_NAMES, FileSpec, NodeSpec, ParamDecl, parse_file, type_compatible
+from mmexec.executive.schema import (
+    FAILURE_KEYS,
+    RECOVERY_SUFFIXES,
+    TYPE_NAMES,
+    FileSpec,
+    NodeSpec,
+    ParamDecl,
+    parse_file,
+    recovery_key_prefix,
+    type_compatible,
+)
 from mmexec.executive.values import Const, Expr, substitute
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
@@ -222,60 +232,97 @@ class MissionTree:
         return dict(self.rt.bb)
 
 
+_DECORATORS: dict[str, Any] = {"invert": N.Invert, "force_success": N.ForceSuccess, "force_failure": N.ForceFailure}
+
+
 class _Builder:
+    """Builds the py_trees nodes of one tree from validated specs (one pass, no copies).
+
+    Each node kind has one method ``b_<kind>(spec, env, path, name)``; the path of a
+    node is its parent's path, ``/``, its name.
+    """
+
     def __init__(self, rt: N.Runtime, registry: SkillRegistry) -> None:
         self.rt = rt
         self.registry = registry
+        self.kinds: dict[str, Callable[[NodeSpec, Mapping[str, Expr], str, str], Any]] = {
+            "sequence": self.b_sequence,
+            "fallback": self.b_fallback,
+            "parallel": self.b_parallel,
+            "recovery": self.b_recovery,
+            "include": self.b_include,
+            "retry": self.b_retry,
+            "timeout": self.b_timeout,
+            "repeat": self.b_repeat,
+            "invert": self.b_simple_decorator,
+            "force_success": self.b_simple_decorator,
+            "force_failure": self.b_simple_decorator,
+            "condition": self.b_condition,
+            "wait": self.b_wait,
+            "skill": self.b_skill,
+        }
 
     def build(self, spec: NodeSpec, env: Mapping[str, Expr], parent: str, name: str | None = None) -> Any:
-        rt = self.rt
-        kind = spec.kind
         nm = name or spec.name or self.default_name(spec)
-        path = f"{parent}/{nm}" if parent else nm
+        return self.kinds[spec.kind](spec, env, f"{parent}/{nm}" if parent else nm, nm)
+
+    def b_sequence(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        return N.Sequence(self.rt, path, nm, self.build_children(spec.children, env, path), reactive=spec.opts["reactive"])
+
+    def b_fallback(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        return N.Fallback(self.rt, path, nm, self.build_children(spec.children, env, path), reactive=spec.opts["reactive"])
+
+    def b_parallel(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        kids = self.build_children(spec.children, env, path)
+        return N.Parallel(self.rt, path, nm, kids, threshold=min(spec.opts["threshold"], len(kids)))
+
+    def b_recovery(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        kids = self.build_children(spec.children, env, path)
         o = spec.opts
-        if kind in ("sequence", "fallback", "parallel", "recovery"):
-            kids = self.build_children(spec.children, env, path)
-            if kind == "sequence":
-                return N.Sequence(rt, path, nm, kids, reactive=o["reactive"])
-            if kind == "fallback":
-                return N.Fallback(rt, path, nm, kids, reactive=o["reactive"])
-            if kind == "parallel":
-                return N.Parallel(rt, path, nm, kids, threshold=min(o["threshold"], len(kids)))
-            give_up = kids[2] if o["has_give_up"] else None
-            return N.Recovery(rt, path, nm, kids[0], kids[1], give_up, o["max_recoveries"])
-        if kind == "include":
-            sub: FileSpec = o["file"]
-            sub_env: dict[str, Expr] = {}
-            for pname, d in sub.params.items():
-                if pname in o["bindings"]:
-                    sub_env[pname] = substitute(o["bindings"][pname], env)
-                else:
-                    sub_env[pname] = Const(d.default)
-            assert sub.tree is not None
-            child = self.build(sub.tree, sub_env, path)
-            return N.Subtree(rt, path, nm, child)
-        if kind in ("retry", "timeout", "repeat", "invert", "force_success", "force_failure"):
-            child = self.build(spec.children[0], env, path)
-            if kind == "retry":
-                return N.Retry(rt, path, nm, child, o["attempts"])
-            if kind == "timeout":
-                return N.Timeout(rt, path, nm, child, substitute(o["seconds"], env))
-            if kind == "repeat":
-                return N.Repeat(rt, path, nm, child, o["times"])
-            cls = {"invert": N.Invert, "force_success": N.ForceSuccess, "force_failure": N.ForceFailure}[kind]
-            return cls(rt, path, nm, child)
-        if kind == "condition":
-            return N.Condition(rt, path, nm, o["key"], o["op"], substitute(o["value"], env))
-        if kind == "wait":
-            return N.Wait(rt, path, nm, substitute(o["seconds"], env))
-        # skill
+        give_up = kids[2] if o["has_give_up"] else None
+        return N.Recovery(self.rt, path, nm, kids[0], kids[1], give_up, o["max_recoveries"],
+                          key_prefix=recovery_key_prefix(spec))
+
+    def b_include(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        sub: FileSpec = spec.opts["file"]
+        bindings = spec.opts["bindings"]
+        sub_env: dict[str, Expr] = {}
+        for pname, d in sub.params.items():
+            sub_env[pname] = substitute(bindings[pname], env) if pname in bindings else Const(d.default)
+        assert sub.tree is not None
+        return N.Subtree(self.rt, path, nm, self.build(sub.tree, sub_env, path))
+
+    def b_retry(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        return N.Retry(self.rt, path, nm, self.build(spec.children[0], env, path), spec.opts["attempts"])
+
+    def b_timeout(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        child = self.build(spec.children[0], env, path)
+        return N.Timeout(self.rt, path, nm, child, substitute(spec.opts["seconds"], env))
+
+    def b_repeat(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        return N.Repeat(self.rt, path, nm, self.build(spec.children[0], env, path), spec.opts["times"])
+
+    def b_simple_decorator(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        return _DECORATORS[spec.kind](self.rt, path, nm, self.build(spec.children[0], env, path))
+
+    def b_condition(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        o = spec.opts
+        return N.Condition(self.rt, path, nm, o["key"], o["op"], substitute(o["value"], env))
+
+    def b_wait(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        return N.Wait(self.rt, path, nm, substitute(spec.opts["seconds"], env))
+
+    def b_skill(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        o = spec.opts
         params = {k: substitute(v, env) for k, v in o["params"].items()}
-        return N.SkillLeaf(rt, path, nm, o["skill"], params, o["outputs"])
+        return N.SkillLeaf(self.rt, path, nm, o["skill"], params, o["outputs"])
 
     @staticmethod
     def default_name(spec: NodeSpec) -> str:
-        if spec.kind == "skill" and spec.opts.get("skill") is not None:
-            return spec.opts["skill"].name  # type: ignore[no-any-return]
+        if spec.kind == "skill":
+            sk = spec.opts.get("skill")
+            if sk is not None:
+                return sk.name  # type: ignore[no-any-return]
         return spec.kind
 
     def build_children(self, specs: list[NodeSpec], env: Mapping[str, Expr], path: str) -> list[Any]:
@@ -349,17 +396,47 @@ class _Loader:
         return self.load(target, shown, mark, repr(rel))
 
 
-def _count(spec: NodeSpec, memo: dict[int, int]) -> int:
-    key = id(spec)
+def _recovery_names(
+    fs: FileSpec, problems: Problems, memo: dict[Path, dict[str, Mark]], busy: set[Path]
+) -> dict[str, Mark]:
+    """Key prefix -> mark of every recovery node in ``fs``'s tree once includes are
+    expanded (memoised per file). A prefix met twice is a problem, recorded where the
+    second one appears: at the recovery node, or at the include that brings it in."""
+    key = fs.path
     if key in memo:
         return memo[key]
-    total = 1 + sum(_count(c, memo) for c in spec.children)
-    if spec.kind == "include":
+    if key in busy:  # an include cycle, reported by the loader
+        return {}
+    busy.add(key)
+    names: dict[str, Mark] = {}
+    items: list[tuple[Mark, NodeSpec]] = [(r.mark, r) for r in fs.recoveries] + [(i.mark, i) for i in fs.includes]
+    items.sort(key=lambda it: (it[0].line, it[0].col))
+    for mark, spec in items:
+        if spec.kind == "recovery":
+            prefix = recovery_key_prefix(spec)
+            if prefix in names:
+                problems.add(mark, f"recovery name {prefix!r} is already used by the recovery at {names[prefix]}; "
+                                   f"both would write {_recovery_keys(prefix)}: give each recovery a distinct `name:`")
+            else:
+                names[prefix] = mark
+            continue
         sub = spec.opts.get("file")
-        if sub is not None and sub.tree is not None:
-            total += _count(sub.tree, memo)
-    memo[key] = min(total, 1 << 40)
-    return memo[key]
+        if sub is None:
+            continue
+        for prefix, where in _recovery_names(sub, problems, memo, busy).items():
+            if prefix in names:
+                problems.add(mark, f"include {spec.opts['path']!r}: its recovery {prefix!r} at {where} is already in the "
+                                   f"tree (recovery at {names[prefix]}); both would write {_recovery_keys(prefix)}: "
+                                   f"give each recovery a distinct `name:` (a file with a recovery can be included once)")
+            else:
+                names[prefix] = where
+    busy.discard(key)
+    memo[key] = names
+    return names
+
+
+def _recovery_keys(prefix: str) -> str:
+    return ", ".join(f"{prefix}.{suffix}" for suffix in RECOVERY_SUFFIXES)
 
 
 def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY) -> Mission:
@@ -379,10 +456,12 @@ def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY) -> Missio
         writes.update(s.writes)
     for r, d in top.requests.items():
         writes[f"request.{r}"] = d.type
-    known = sorted(set(writes) | {k for s in specs for k in s.params})
+    known: list[str] | None = None
     for s in specs:
         for key, mark in s.reads:
             if key not in writes:
+                if known is None:
+                    known = sorted(set(writes) | {k for s in specs for k in s.params})
                 hint = did_you_mean(key, known)
                 if key.startswith("request."):
                     fields = ", ".join(top.requests) or "none"
@@ -400,7 +479,8 @@ def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY) -> Missio
                     problems.add(d.mark or s.mark, f"request field {r!r} is needed by {s.path.name} but not declared by the mission {top.name}")
                 elif top.requests[r].type is not d.type:
                     problems.add(d.mark or s.mark, f"request field {r!r} is {d.type.__name__} here but {top.requests[r].type.__name__} in the mission {top.name}")
-    n = _count(top.tree, {})
+    _recovery_names(top, problems, {}, set())
+    n = top.tree.size
     if n > MAX_TREE_NODES:
         problems.add(top.tree.mark, f"mission has {n} nodes once includes are expanded, more than {MAX_TREE_NODES}")
     problems.raise_if_any()

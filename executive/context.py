@@ -29,7 +29,10 @@ class ExecContext:
     wait reads [s]; ``registry``: the skills leaves may run; ``emit``: the event sink,
     called as ``emit(event, **fields)`` (fields always include ``node``, the node path,
     and ``t``, the clock time [s]); ``world``: a dict shared by every skill of the run
-    (across requests); ``profile``: the robot profile from the config.
+    (across requests); ``profile``: the robot profile from the config;
+    ``recovery_enabled``: false disables every recovery node (its bound becomes 0:
+    the action runs once and a failure runs ``give_up`` and fails), for ablation
+    runs such as ``mmexec campaign --no-recovery``.
     """
 
     robot: Robot
@@ -38,3 +41,4 @@ class ExecContext:
     emit: Callable[..., None] = drop_event
     world: dict[str, Any] = field(default_factory=dict)
     profile: Mapping[str, Any] = field(default_factory=dict)
+    recovery_enabled: bool = True

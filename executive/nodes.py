@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import operator
+import uuid
 from collections.abc import Callable, Iterator, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -104,14 +105,80 @@ class MissionNode:
     children: list[Any]
     path: str
     rt: Runtime
+    name: str
+    #: nodes still stopping after this node preempted them (empty: none)
+    _stop_list: list[MissionNode] | tuple[()] = ()
+    #: running children this node is halting (empty: none)
+    _halt_list: list[MissionNode] | tuple[()] = ()
+    _pending: Status | None = None
+    stopping = False
 
-    def _mn_init(self, rt: Runtime, path: str) -> None:
+    def _mn_init(self, rt: Runtime, path: str, name: str, children: list[Any]) -> None:
+        """Set the node's state, including every attribute py_trees' constructors set.
+
+        The py_trees constructors are not called: per node they draw a ``uuid4()``,
+        build a logger and a tick generator, and re-check each child, which was half
+        the cost of instantiating a 1000-node mission. ``id``, ``logger``,
+        ``iterator`` and ``qualified_name`` are created on first use instead (the
+        display and visitors still find them); a child whose parent is already set is
+        refused as py_trees' ``add_child`` does.
+        """
         self.rt = rt
         self.path = path
-        self.stopping = False
-        self._pending: Status | None = None
-        self._stop_list: list[MissionNode] = []
-        self._halt_list: list[MissionNode] = []
+        self.name = name
+        self.status = INVALID
+        self.parent = None
+        self.children = children
+        self.blackboards = []
+        self.feedback_message = ""
+        self.blackbox_level = py_trees.common.BlackBoxLevel.NOT_A_BLACKBOX
+        for c in children:
+            if c.parent is not None:
+                raise RuntimeError(f"{path}: node {c.path!r} already has a parent ({c.parent.path!r})")
+            c.parent = self
+
+    # -- py_trees attributes created on first use ------------------------------------
+    @property
+    def id(self) -> uuid.UUID:
+        """py_trees' unique node id (drawn on first use)."""
+        nid: uuid.UUID | None = self.__dict__.get("_id")
+        if nid is None:
+            nid = self.__dict__["_id"] = uuid.uuid4()
+        return nid
+
+    @id.setter
+    def id(self, value: uuid.UUID) -> None:
+        self.__dict__["_id"] = value
+
+    @property
+    def logger(self) -> py_trees.logging.Logger:
+        """py_trees' per-node logger (built on first use)."""
+        lg: py_trees.logging.Logger | None = self.__dict__.get("_logger")
+        if lg is None:
+            lg = self.__dict__["_logger"] = py_trees.logging.Logger(self.name)
+        return lg
+
+    @logger.setter
+    def logger(self, value: py_trees.logging.Logger) -> None:
+        self.__dict__["_logger"] = value
+
+    @property
+    def iterator(self) -> Iterator[py_trees.behaviour.Behaviour]:
+        """py_trees' stored tick generator (created on first use; the executive never
+        uses it)."""
+        it: Iterator[py_trees.behaviour.Behaviour] | None = self.__dict__.get("_iterator")
+        if it is None:
+            it = self.__dict__["_iterator"] = self.tick()
+        return it
+
+    @iterator.setter
+    def iterator(self, value: Iterator[py_trees.behaviour.Behaviour]) -> None:
+        self.__dict__["_iterator"] = value
+
+    @property
+    def qualified_name(self) -> str:
+        """py_trees' ``ClassName/name``."""
+        return f"{type(self).__qualname__}/{self.name}"
 
     # -- lifecycle -----------------------------------------------------------------
     def _start(self) -> None:
@@ -159,7 +226,7 @@ class MissionNode:
             self._halt_list = [c for c in self._halt_list if not c.halt()]
             if self._halt_list:
                 return False
-        self._stop_list = []
+        self._stop_list = ()
         self.stopping = False
         self._on_halted()
         self._set(INVALID)
@@ -193,31 +260,35 @@ class MissionNode:
 # ------------------------------------------------------------------------ composites
 
 
-class Sequence(MissionNode, py_trees.composites.Sequence):
-    """Children in order; SUCCESS when all succeed. ``reactive``: restart from the first
-    child every tick, halting a running later child when an earlier one fails."""
+class _Chain(MissionNode):
+    """Sequence and fallback: children in order while they return ``_advance_on``.
 
-    def __init__(self, rt: Runtime, path: str, name: str, children: list[Any], reactive: bool = False) -> None:
-        py_trees.composites.Sequence.__init__(self, name=name, memory=not reactive, children=children)
-        self._mn_init(rt, path)
-        self.reactive = reactive
-        self._index = 0
+    One tick: tick the current child (the first one when ``reactive``); while it returns
+    ``_advance_on`` go on to the next; any other status is the node's status. When
+    every child returned ``_advance_on`` that is the node's status too. ``reactive``:
+    when an earlier child no longer returns ``_advance_on``, the running later child
+    is preempted (halted) before that status is returned.
+    """
+
+    _advance_on: Status = SUCCESS
+    reactive = False
+    _index = 0
 
     def _start(self) -> None:
         self._index = 0
 
     def _update(self) -> Status:
         children = self.children
+        advance = self._advance_on
         n = len(children)
         i = 0 if self.reactive else self._index
         while i < n:
-            child = children[i]
-            st = child.step()
-            if st is SUCCESS:
+            st = children[i].step()
+            if st is advance:
                 i += 1
                 continue
             if self.reactive and self._index > i:
-                # an earlier child failed or is running again: the later running child is preempted
+                # an earlier child decided again: the later running child is preempted
                 self._index = i
                 later = [c for c in children[i + 1 :] if c.status is RUNNING]
                 if later:
@@ -225,48 +296,38 @@ class Sequence(MissionNode, py_trees.composites.Sequence):
             self._index = i
             return st
         self._index = n
-        return SUCCESS
+        return advance
 
     def tip(self) -> py_trees.behaviour.Behaviour | None:
         return _tip(self)
 
 
-class Fallback(MissionNode, py_trees.composites.Selector):
+class Sequence(_Chain, py_trees.composites.Sequence):
+    """Children in order; SUCCESS when all succeed. ``reactive``: restart from the first
+    child every tick, halting a running later child when an earlier one fails (or is
+    RUNNING again)."""
+
+    _advance_on = SUCCESS
+
+    def __init__(self, rt: Runtime, path: str, name: str, children: list[Any], reactive: bool = False) -> None:
+        self._mn_init(rt, path, name, children)
+        self.memory = not reactive
+        self.current_child = None
+        self.reactive = reactive
+
+
+class Fallback(_Chain, py_trees.composites.Selector):
     """Children in order until one does not fail. ``reactive``: restart from the first
     child every tick; a higher-priority child that is RUNNING or SUCCESS preempts the
     running lower-priority one."""
 
+    _advance_on = FAILURE
+
     def __init__(self, rt: Runtime, path: str, name: str, children: list[Any], reactive: bool = False) -> None:
-        py_trees.composites.Selector.__init__(self, name=name, memory=not reactive, children=children)
-        self._mn_init(rt, path)
+        self._mn_init(rt, path, name, children)
+        self.memory = not reactive
+        self.current_child = None
         self.reactive = reactive
-        self._index = 0
-
-    def _start(self) -> None:
-        self._index = 0
-
-    def _update(self) -> Status:
-        children = self.children
-        n = len(children)
-        i = 0 if self.reactive else self._index
-        while i < n:
-            child = children[i]
-            st = child.step()
-            if st is FAILURE:
-                i += 1
-                continue
-            if self.reactive and self._index > i:
-                self._index = i
-                later = [c for c in children[i + 1 :] if c.status is RUNNING]
-                if later:
-                    return self._preempt(later, st)
-            self._index = i
-            return st
-        self._index = n
-        return FAILURE
-
-    def tip(self) -> py_trees.behaviour.Behaviour | None:
-        return _tip(self)
 
 
 class Parallel(MissionNode, py_trees.composites.Parallel):
@@ -282,8 +343,9 @@ class Parallel(MissionNode, py_trees.composites.Parallel):
             policy: py_trees.common.ParallelPolicy.Base = py_trees.common.ParallelPolicy.SuccessOnAll(synchronise=True)
         else:
             policy = py_trees.common.ParallelPolicy.SuccessOnOne()
-        py_trees.composites.Parallel.__init__(self, name=name, policy=policy, children=children)
-        self._mn_init(rt, path)
+        self._mn_init(rt, path, name, children)
+        self.policy = policy
+        self.current_child = None
         self.threshold = threshold
         self._done: list[Status] = []
 
@@ -318,8 +380,8 @@ class Parallel(MissionNode, py_trees.composites.Parallel):
 
 class _Decorator(MissionNode, py_trees.decorators.Decorator):
     def __init__(self, rt: Runtime, path: str, name: str, child: Any) -> None:
-        py_trees.decorators.Decorator.__init__(self, child=child, name=name)
-        self._mn_init(rt, path)
+        self._mn_init(rt, path, name, [child])
+        self.decorated = child
         self.child = child
 
     def update(self) -> Status:  # py_trees abstract hook; the executive uses _update
@@ -444,8 +506,7 @@ class Timeout(_Decorator):
 
 class _Leaf(MissionNode, py_trees.behaviour.Behaviour):
     def __init__(self, rt: Runtime, path: str, name: str) -> None:
-        py_trees.behaviour.Behaviour.__init__(self, name=name)
-        self._mn_init(rt, path)
+        self._mn_init(rt, path, name, [])
 
     def update(self) -> Status:  # py_trees abstract hook; the executive uses _update
         return self.status
@@ -666,7 +727,12 @@ _ACTION, _RECOVERY, _GIVE_UP = 0, 1, 2
 class Recovery(MissionNode, py_trees.composites.Composite):
     """Nav2-style recovery node with a give-up branch (docs/missions.md).
 
-    Children: ``[action, recovery]`` or ``[action, recovery, give_up]``.
+    Children: ``[action, recovery]`` or ``[action, recovery, give_up]``. The
+    bookkeeping is written to the blackboard under ``<key_prefix>.attempts``,
+    ``.recoveries``, ``.last_failure`` and ``.outcome`` (``key_prefix`` defaults to
+    ``name``). When the tree's :class:`~mmexec.executive.context.ExecContext` has
+    ``recovery_enabled`` false, the bound is 0 for every activation: the action runs
+    once and a failure goes straight to ``give_up``.
     """
 
     def __init__(
@@ -678,20 +744,24 @@ class Recovery(MissionNode, py_trees.composites.Composite):
         recovery: Any,
         give_up: Any | None,
         max_recoveries: int,
+        key_prefix: str | None = None,
     ) -> None:
         children = [action, recovery] + ([give_up] if give_up is not None else [])
-        py_trees.composites.Composite.__init__(self, name=name, children=children)
-        self._mn_init(rt, path)
+        self._mn_init(rt, path, name, children)
+        self.current_child = None
         self.action, self.recovery, self.give_up = action, recovery, give_up
         self.max_recoveries = max_recoveries
+        #: the bound of the current activation (0 when recovery is disabled)
+        self.bound = max_recoveries
         self.recoveries = 0
         self.attempts = 0
         self.phase = _ACTION
         self._outcome = "running"
-        self.k_attempts = f"{name}.attempts"
-        self.k_recoveries = f"{name}.recoveries"
-        self.k_failure = f"{name}.last_failure"
-        self.k_outcome = f"{name}.outcome"
+        prefix = name if key_prefix is None else key_prefix
+        self.k_attempts = f"{prefix}.attempts"
+        self.k_recoveries = f"{prefix}.recoveries"
+        self.k_failure = f"{prefix}.last_failure"
+        self.k_outcome = f"{prefix}.outcome"
 
     def update(self) -> Status:  # py_trees abstract hook; the executive uses _update
         return self.status
@@ -711,6 +781,8 @@ class Recovery(MissionNode, py_trees.composites.Composite):
         bb[self.k_recoveries] = self.recoveries
 
     def _start(self) -> None:
+        ctx = self.rt.ctx
+        self.bound = self.max_recoveries if ctx is None or ctx.recovery_enabled else 0
         self.recoveries = 0
         self.attempts = 0
         self.phase = _ACTION
@@ -740,13 +812,14 @@ class Recovery(MissionNode, py_trees.composites.Composite):
             else:
                 reason = f"{self.action.path} failed"
             bb[self.k_failure] = reason
-            if self.recoveries >= self.max_recoveries:
-                rt.emit("recovery_give_up", self.path, attempts=self.attempts, recoveries=self.recoveries, reason=reason)
+            if self.recoveries >= self.bound:
+                rt.emit("recovery_give_up", self.path, attempts=self.attempts, recoveries=self.recoveries, reason=reason,
+                        max_recoveries=self.bound)
                 return self._begin_give_up("gave_up")
             self.recoveries += 1
             self._record()
             rt.emit("recovery_attempt", self.path, attempt=self.recoveries, reason=reason,
-                    max_recoveries=self.max_recoveries)
+                    max_recoveries=self.bound)
             self.phase = _RECOVERY
         if self.phase == _RECOVERY:
             st = self.recovery.step()

@@ -37,14 +37,17 @@ __all__ = [
     "NODE_TYPES",
     "NodeSpec",
     "ParamDecl",
+    "SIZE_CAP",
     "TYPE_NAMES",
     "parse_file",
+    "recovery_key_prefix",
 ]
 
 COMPOSITES = ("sequence", "fallback", "parallel")
 DECORATORS = ("retry", "timeout", "repeat", "invert", "force_success", "force_failure")
 LEAVES = ("condition", "wait", "skill")
 NODE_TYPES = COMPOSITES + DECORATORS + LEAVES + ("include", "recovery")
+_NODE_TYPE_SET = frozenset(NODE_TYPES)
 
 #: options each node type accepts besides its type key and ``name``
 OPTIONS: dict[str, tuple[str, ...]] = {
@@ -63,6 +66,8 @@ OPTIONS: dict[str, tuple[str, ...]] = {
     "include": ("params",),
     "recovery": (),
 }
+#: every key a node of each type accepts (type key, options, ``name``)
+_NODE_KEYS: dict[str, frozenset[str]] = {k: frozenset((k, "name", *v)) for k, v in OPTIONS.items()}
 RECOVERY_KEYS = ("action", "recovery", "max_recoveries", "give_up")
 TOP_KEYS = ("mission", "description", "params", "requests", "tree")
 DECL_KEYS = ("type", "default", "doc")
@@ -71,6 +76,13 @@ NAME_RE = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_\-]*")
 #: recovery bookkeeping key suffixes
 RECOVERY_SUFFIXES = ("attempts", "recoveries", "last_failure", "outcome")
 FAILURE_KEYS = {"last_failure": str, "last_failure_kind": str, "last_failure_node": str}
+#: node counts above this are reported as this (a bound, not a count, for include bombs)
+SIZE_CAP = 1 << 40
+
+
+def recovery_key_prefix(spec: NodeSpec) -> str:
+    """The blackboard key prefix of a recovery node: its ``name``, else ``recovery``."""
+    return spec.name or "recovery"
 
 
 @dataclass
@@ -95,6 +107,8 @@ class NodeSpec:
     name: str | None = None
     children: list[NodeSpec] = field(default_factory=list)
     opts: dict[str, Any] = field(default_factory=dict)
+    #: nodes in this subtree once includes are expanded (capped at SIZE_CAP)
+    size: int = 1
 
 
 @dataclass
@@ -116,6 +130,8 @@ class FileSpec:
     includes: list[NodeSpec] = field(default_factory=list)
     #: blackboard reads whose type must fit a skill parameter: (key, type, mark, message prefix, raw)
     typed_reads: list[tuple[str, type, Mark, str, Any]] = field(default_factory=list)
+    #: recovery nodes of this file (not of the files it includes), innermost first
+    recoveries: list[NodeSpec] = field(default_factory=list)
 
 
 def _tname(value: Any) -> str:
@@ -168,7 +184,11 @@ class _Parser:
         self.reads: list[tuple[str, Mark]] = []
         self.writes: dict[str, type | None] = {}
         self.includes: list[NodeSpec] = []
+        self.recoveries: list[NodeSpec] = []
         self.typed_reads: list[tuple[str, type, Mark, str, Any]] = []
+        self.handlers: dict[str, Callable[[NodeSpec, YDict, Any, Mark, int], None]] = {
+            k: getattr(self, "n_" + k) for k in NODE_TYPES
+        }
 
     def err(self, mark: Mark, msg: str) -> None:
         self.p.add(mark, msg)
@@ -205,7 +225,7 @@ class _Parser:
         for r in requests:
             self.writes[f"request.{r}"] = requests[r].type
         return FileSpec(self.path, name, desc, self.params, requests, tree, doc.mark, self.reads, self.writes,
-                        self.includes, self.typed_reads)
+                        self.includes, self.typed_reads, self.recoveries)
 
     def decls(self, doc: YDict, key: str, allow_default: bool) -> dict[str, ParamDecl]:
         out: dict[str, ParamDecl] = {}
@@ -289,7 +309,7 @@ class _Parser:
             else:
                 self.err(mark, f"expected a node (a mapping with one of: {', '.join(NODE_TYPES)}), got {_tname(raw)}")
             return None
-        kinds = [k for k in raw if k in NODE_TYPES]
+        kinds = [k for k in raw if k in _NODE_TYPE_SET]
         if not kinds:
             unknown = [k for k in raw if k != "name"]
             for k in unknown:
@@ -303,11 +323,12 @@ class _Parser:
             self.err(raw.key_mark(kinds[1]), f"node has several types ({', '.join(repr(k) for k in kinds)}); one node per mapping, put them in a sequence")
             return None
         kind = kinds[0]
-        allowed = OPTIONS[kind] + ("name",)
-        for k in raw:
-            if k != kind and k not in allowed:
-                self.err(raw.key_mark(k), f"unknown key {k!r} for {kind}" + (
-                    did_you_mean(k, allowed) or (f" (expected one of: {', '.join(allowed)})" if len(allowed) > 1 else " (it takes only 'name')")))
+        if not _NODE_KEYS[kind].issuperset(raw):
+            allowed = OPTIONS[kind] + ("name",)
+            for k in raw:
+                if k != kind and k not in allowed:
+                    self.err(raw.key_mark(k), f"unknown key {k!r} for {kind}" + (
+                        did_you_mean(k, allowed) or (f" (expected one of: {', '.join(allowed)})" if len(allowed) > 1 else " (it takes only 'name')")))
         spec = NodeSpec(kind, raw.key_mark(kind))
         if "name" in raw:
             nm = raw["name"]
@@ -315,8 +336,15 @@ class _Parser:
                 spec.name = nm
             else:
                 self.err(raw.value_mark("name"), f"name: expected a node name (letters, digits, _ and -), got {nm!r}")
-        arg, am = raw[kind], raw.value_mark(kind)
-        getattr(self, "n_" + kind)(spec, raw, arg, am, depth)
+        self.handlers[kind](spec, raw, raw[kind], raw.value_mark(kind), depth)
+        size = 1
+        for c in spec.children:
+            size += c.size
+        if kind == "include":
+            sub = spec.opts.get("file")
+            if sub is not None and sub.tree is not None:
+                size += sub.tree.size
+        spec.size = min(size, SIZE_CAP)
         return spec
 
     def child(self, arg: Any, am: Mark, depth: int, kind: str) -> NodeSpec | None:
@@ -614,7 +642,8 @@ class _Parser:
         spec.opts["max_recoveries"] = mr
         spec.opts["has_give_up"] = parts.get("give_up") is not None
         spec.children = [c for c in (parts.get("action"), parts.get("recovery"), parts.get("give_up")) if c is not None]
-        name = spec.name or "recovery"
+        self.recoveries.append(spec)
+        name = recovery_key_prefix(spec)
         for suffix in RECOVERY_SUFFIXES:
             self.writes[f"{name}.{suffix}"] = str if suffix in ("last_failure", "outcome") else int
 

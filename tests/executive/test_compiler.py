@@ -141,20 +141,20 @@ def test_each_instantiate_is_a_fresh_tree(h):
 
 
 def test_load_builds_no_trees_and_reads_only_files(h, monkeypatch):
-    import py_trees
+    from mmexec.executive.nodes import MissionNode
 
     created = []
-    orig = py_trees.behaviour.Behaviour.__init__
+    orig = MissionNode._mn_init
 
-    def spy(self, name):
-        created.append(name)
-        orig(self, name)
+    def spy(self, rt, path, name, children):
+        created.append(path)
+        orig(self, rt, path, name, children)
 
-    monkeypatch.setattr(py_trees.behaviour.Behaviour, "__init__", spy)
+    monkeypatch.setattr(MissionNode, "_mn_init", spy)
     m = h.load("tree:\n  sequence: [{skill: succeed}, {wait: 1}]\n")
     assert created == []
     m.instantiate(h.ctx, {})
-    assert len(created) == 3
+    assert sorted(created) == ["m", "m/succeed", "m/wait"]
 
 
 def test_large_generated_mission_compiles(h):
