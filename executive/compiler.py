@@ -425,9 +425,11 @@ def _recovery_names(
             continue
         for prefix, where in _recovery_names(sub, problems, memo, busy).items():
             if prefix in names:
+                same = names[prefix] == where
                 problems.add(mark, f"include {spec.opts['path']!r}: its recovery {prefix!r} at {where} is already in the "
-                                   f"tree (recovery at {names[prefix]}); both would write {_recovery_keys(prefix)}: "
-                                   f"give each recovery a distinct `name:` (a file with a recovery can be included once)")
+                                   f"tree ({'included before' if same else 'recovery at ' + str(names[prefix])}); both "
+                                   f"would write {_recovery_keys(prefix)}: give each recovery a distinct `name:`"
+                                   + (" (a file with a recovery can be included once)" if same else ""))
             else:
                 names[prefix] = where
     busy.discard(key)

@@ -163,3 +163,22 @@ def test_large_generated_mission_compiles(h):
     assert m.node_count == 601
     t = m.instantiate(h.ctx, {})
     assert t.tick() is Status.SUCCESS
+
+
+def test_node_count_expands_each_include_where_it_is_used(h):
+    h.write("leaf.yaml", "tree: {sequence: [{skill: succeed}, {skill: succeed}]}\n")
+    h.write("pair.yaml", "tree:\n  sequence:\n    - include: leaf.yaml\n    - include: leaf.yaml\n")
+    m = h.load("tree:\n  fallback:\n    - include: pair.yaml\n    - include: pair.yaml\n    - skill: fail\n")
+    # leaf: 3; pair: 1 + 2 * (include + 3) = 9; root: 1 + 2 * (include + 9) + 1 = 22
+    assert m.node_count == 22
+    assert len(m.instantiate(h.ctx, {}).nodes()) == 22
+
+
+def test_include_bomb_is_refused_by_node_count_before_building(h):
+    h.write("f0.yaml", "tree: {skill: succeed}\n")
+    for k in range(1, 15):
+        h.write(f"f{k}.yaml", f"tree:\n  sequence:\n    - include: f{k - 1}.yaml\n    - include: f{k - 1}.yaml\n")
+    with pytest.raises(InputError) as ei:
+        h.load("tree: {include: f14.yaml}\n")
+    # f0 has 1 node, f_k = 1 + 2 * (1 + f_(k-1)) = 4 * 2**k - 3; the root include adds one
+    assert str(ei.value) == f"{h.tmp / 'm.yaml'}:1:8: mission has {4 * 2**14 - 2} nodes once includes are expanded, more than 50000"

@@ -143,3 +143,139 @@ def test_later_nodes_read_the_record(h):
     """)
     assert h.run(t)[0] is S
     assert t.blackboard()["report"] == "gave up after 2 attempts: no IK"
+
+
+# ------------------------------------------------------------------ ablation switch
+
+
+@pytest.mark.parametrize("recovery", ["s", "f"])
+def test_recovery_disabled_runs_action_once_then_gives_up(h, recovery):
+    h.ctx.recovery_enabled = False
+    t = make(h, "fs", recovery=recovery, n=2)
+    st, _ = h.run(t)
+    # enabled, "fs" would succeed after one recovery; disabled it gives up at once
+    assert st is F
+    assert runs(h, "action") == 1 and runs(h, "recovery") == 0 and runs(h, "give_up") == 1
+    bb = t.blackboard()
+    assert bb["grasp_item.outcome"] == "gave_up"
+    assert bb["grasp_item.attempts"] == 1 and bb["grasp_item.recoveries"] == 0
+    assert [e for e, _ in h.events if e.startswith("recovery_")] == ["recovery_give_up"]
+    give = [f for e, f in h.events if e == "recovery_give_up"]
+    assert give[0]["max_recoveries"] == 0
+    assert t.root.max_recoveries == 2  # the mission's bound is kept; only this run ignores it
+
+
+def test_recovery_disabled_still_succeeds_when_the_action_does(h):
+    h.ctx.recovery_enabled = False
+    t = make(h, "s")
+    assert h.run(t)[0] is S
+    assert runs(h, "action") == 1 and runs(h, "give_up") == 0
+    assert t.blackboard()["grasp_item.outcome"] == "success"
+
+
+def test_recovery_enabled_is_the_default_and_read_per_activation(h):
+    assert h.ctx.recovery_enabled is True
+    t = make(h, "fs")
+    assert h.run(t)[0] is S
+    assert runs(h, "action") == 2 and runs(h, "recovery") == 1
+    # the same context switched off: the next tree (next request) runs without recovery
+    h.ctx.recovery_enabled = False
+    h.ctx.world.clear()
+    t2 = make(h, "fs")
+    assert h.run(t2)[0] is F
+    assert runs(h, "action") == 1 and runs(h, "recovery") == 0
+
+
+# ------------------------------------------------------------------ blackboard key names
+
+
+def test_unnamed_root_recovery_writes_the_keys_the_compiler_declares(h):
+    # the root's display name is the mission's name; its keys still use 'recovery.'
+    t = h.tree("""
+        mission: fetch
+        tree:
+          sequence:
+            - force_success:
+                recovery:
+                  action: {skill: fail, params: {reason: "no path"}}
+                  recovery: {skill: succeed}
+                  max_recoveries: 1
+            - skill: succeed
+              params: {value: "{recovery.outcome} after {recovery.attempts}: {recovery.last_failure}"}
+              outputs: {value: report}
+    """)
+    assert h.run(t)[0] is S
+    assert t.blackboard()["report"] == "gave_up after 2: no path"
+    t2 = h.tree("""
+        mission: fetch
+        tree:
+          recovery:
+            action: {skill: succeed}
+            recovery: {skill: succeed}
+            max_recoveries: 1
+    """)
+    assert t2.root.path == "fetch"
+    assert h.run(t2)[0] is S
+    assert t2.blackboard()["recovery.outcome"] == "success"
+    assert "fetch.outcome" not in t2.blackboard()
+
+
+RECOVERY = "{{recovery: {{action: {{skill: succeed}}, recovery: {{skill: succeed}}, max_recoveries: 1}}{name}}}"
+
+
+def _rec(name=None):
+    return RECOVERY.format(name=f", name: {name}" if name else "")
+
+
+def _problems(h, text, name="m.yaml"):
+    from mmexec.config.yamlload import InputError
+
+    with pytest.raises(InputError) as ei:
+        h.load(text, name)
+    return str(ei.value).splitlines()
+
+
+def test_two_recoveries_with_one_name_are_a_located_error(h):
+    lines = _problems(h, f"tree:\n  sequence:\n    - {_rec('grasp')}\n    - {_rec('grasp')}\n")
+    assert len(lines) == 1
+    assert lines[0].startswith(f"{h.tmp / 'm.yaml'}:4:8: recovery name 'grasp' is already used by the recovery at ")
+    assert lines[0].endswith(":3:8; both would write grasp.attempts, grasp.recoveries, grasp.last_failure, "
+                             "grasp.outcome: give each recovery a distinct `name:`")
+
+
+def test_two_unnamed_recoveries_are_an_error_even_when_nested(h):
+    text = "tree:\n  recovery:\n    action: " + _rec() + "\n    recovery: {skill: succeed}\n    max_recoveries: 1\n"
+    lines = _problems(h, text)
+    assert len(lines) == 1 and ":3:14: recovery name 'recovery' is already used" in lines[0], lines
+
+
+def test_distinct_names_and_includes_once_are_fine(h):
+    h.write("sub.yaml", f"tree: {_rec('inner')}\n")
+    m = h.load(f"tree:\n  sequence:\n    - {_rec('a')}\n    - {_rec('b')}\n    - include: sub.yaml\n    - {_rec()}\n")
+    t = m.instantiate(h.ctx, {})
+    assert h.run(t)[0] is S
+    bb = t.blackboard()
+    assert [bb[f"{k}.outcome"] for k in ("a", "b", "inner", "recovery")] == ["success"] * 4
+
+
+def test_a_file_with_a_recovery_included_twice_is_an_error_at_the_second_include(h):
+    h.write("sub.yaml", f"tree: {_rec('approach')}\n")
+    lines = _problems(h, "tree:\n  sequence:\n    - include: sub.yaml\n    - include: sub.yaml\n      name: again\n")
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"{h.tmp / 'm.yaml'}:4:7: include 'sub.yaml': its recovery 'approach' at ")
+    assert "sub.yaml:1:8 is already in the tree (included before)" in lines[0]
+    assert lines[0].endswith("give each recovery a distinct `name:` (a file with a recovery can be included once)")
+
+
+def test_recovery_name_clash_between_includer_and_included_file(h):
+    h.write("sub.yaml", f"tree: {_rec('grasp')}\n")
+    lines = _problems(h, f"tree:\n  sequence:\n    - {_rec('grasp')}\n    - include: sub.yaml\n")
+    assert len(lines) == 1 and ":4:7: include 'sub.yaml': its recovery 'grasp'" in lines[0], lines
+    assert f"is already in the tree (recovery at {h.tmp / 'm.yaml'}:3:8)" in lines[0]
+    assert "included once" not in lines[0]
+
+
+def test_duplicate_inside_an_included_file_is_reported_once_in_that_file(h):
+    h.write("sub.yaml", f"tree:\n  sequence:\n    - {_rec('x')}\n    - {_rec('x')}\n")
+    lines = _problems(h, "tree:\n  include: sub.yaml\n")
+    assert len(lines) == 1 and lines[0].startswith(f"{h.tmp / 'sub.yaml'}:4:8: recovery name 'x'"), lines
