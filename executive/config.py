@@ -60,7 +60,7 @@ BACKENDS: dict[str, str] = {
 CAPABILITIES: tuple[str, ...] = ("base", "arm", "gripper", "camera", "lidar")
 
 #: Modules that define the built-in skills, imported before any user module.
-BUILTIN_SKILL_MODULES: tuple[str, ...] = ("mmexec.skills.primitives",)
+BUILTIN_SKILL_MODULES: tuple[str, ...] = ("mmexec.skills.primitives", "mmexec.skills.fetch")
 
 
 @dataclass(frozen=True)

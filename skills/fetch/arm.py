@@ -1,0 +1,390 @@
+"""Arm skills of the fetch mission: pick and place with the seed paper's poses, every
+motion planned (IK + OMPL, RRTConnect by default, RRT* selectable) against a planning
+scene made of the robot's static boxes (``robot.scene``) plus the perceived item, and
+executed with ``robot.arm.follow(trajectory)``.
+
+Planning-scene updates follow the seed: the item is **added** when perceived (at the start
+of ``pick``), **attached** to the gripper on grasp, **detached** and **removed** on
+place. Arm states are emitted as ``arm_status`` events: ``running``, ``success``,
+``fail`` (with the reason) and ``idle``.
+
+Frames: poses are computed in ``map`` from the marker estimate, then moved into the arm
+base frame through the base pose (odometry) and the arm mount:
+``T_armbase_map = inv(T_map_base @ T_base_armbase)``.
+"""
+
+from __future__ import annotations
+
+import logging
+import weakref
+from collections.abc import Generator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from mmexec.drivers.interfaces import GraspState
+from mmexec.skills.base import FailureKind, Output, Param, SkillCancelled, SkillContext, SkillFailure, skill, wait_goal
+from mmexec.skills.fetch.common import (
+    WORLD_ARM,
+    WORLD_HELD,
+    ArmSettings,
+    FetchProfile,
+    arm_status,
+    fetch_profile,
+    markers,
+)
+from mmexec.skills.manipulation import (
+    ArmKinematics,
+    ArmModel,
+    ArmPlanner,
+    PlannerConfig,
+    PlanningScene,
+    PlanResult,
+    grasp_poses,
+    place_poses,
+    time_parametrize,
+    ur5e,
+    wx250s,
+)
+
+__all__ = ["ArmWorkspace", "arm_pose", "close_workspace", "move_named", "pick", "place", "workspace"]
+
+log = logging.getLogger(__name__)
+
+Gen = Generator[None, None, dict[str, Any]]
+
+
+@dataclass
+class ArmWorkspace:
+    """Kinematics, planning scene and planner of the robot's arm (one per run, in the
+    world model under ``fetch.arm``). The scene's pybullet client is closed by
+    :func:`close_workspace` or when the workspace is garbage-collected."""
+
+    settings: ArmSettings
+    kin: ArmKinematics
+    scene: PlanningScene
+    planner: ArmPlanner
+
+    def config(self, algorithm: str | None = None, time_limit: float | None = None,
+               attempts: int | None = None) -> PlannerConfig:
+        s = self.settings
+        if algorithm is not None and algorithm not in ("rrtconnect", "rrtstar"):
+            raise SkillFailure(FailureKind.PRECONDITION,
+                               f"algorithm must be 'rrtconnect' or 'rrtstar', got {algorithm!r}")
+        return PlannerConfig(algorithm=algorithm or s.algorithm, time_limit=time_limit or s.time_limit,
+                             attempts=attempts or s.attempts, velocity_scale=s.velocity_scale,
+                             acceleration_scale=s.acceleration_scale)
+
+
+def workspace(ctx: SkillContext) -> ArmWorkspace:
+    """The run's :class:`ArmWorkspace`, built from ``profile.fetch.arm`` on first use.
+    PRECONDITION failure when the arm's joints differ from the planning model's."""
+    ws = ctx.world.get(WORLD_ARM)
+    settings = fetch_profile(ctx).arm
+    if isinstance(ws, ArmWorkspace) and ws.settings == settings:
+        return ws
+    if isinstance(ws, ArmWorkspace):
+        ws.scene.close()
+    kin = wx250s(locobot=True) if settings.model == "locobot_wx250s" else ur5e(tcp_offset=settings.tcp_offset)
+    arm = ctx.robot.arm
+    if arm is not None and tuple(arm.joint_names) != tuple(kin.joint_names):
+        raise SkillFailure(FailureKind.PRECONDITION,
+                           f"profile.fetch.arm.model {settings.model!r} plans joints {list(kin.joint_names)}, "
+                           f"but the arm has {list(arm.joint_names)}")
+    scene = PlanningScene(ArmModel.from_sim_model(settings.model))
+    weakref.finalize(scene, PlanningScene.close, scene)
+    ws = ArmWorkspace(settings, kin, scene, ArmPlanner(scene, kin, PlannerConfig(
+        algorithm=settings.algorithm, time_limit=settings.time_limit, attempts=settings.attempts,
+        velocity_scale=settings.velocity_scale, acceleration_scale=settings.acceleration_scale)))
+    ctx.world[WORLD_ARM] = ws
+    return ws
+
+
+def close_workspace(world: dict[str, Any]) -> None:
+    """Free the planning scene of a run (tests and embedding code call this at the end)."""
+    ws = world.pop(WORLD_ARM, None)
+    if isinstance(ws, ArmWorkspace):
+        ws.scene.close()
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _T_armbase_map(ctx: SkillContext) -> np.ndarray:
+    base = ctx.robot.base
+    arm = ctx.robot.arm
+    assert arm is not None
+    T_map_base = base.state().pose.matrix() if base is not None else np.eye(4)
+    return np.linalg.inv(T_map_base @ np.asarray(arm.mount, dtype=float))
+
+
+def _q(ctx: SkillContext) -> list[float]:
+    arm = ctx.robot.arm
+    assert arm is not None
+    return [float(x) for x in arm.state().positions]
+
+
+def _planned(ctx: SkillContext, result: PlanResult, what: str) -> PlanResult:
+    if not result.success or result.trajectory is None:
+        raise SkillFailure(FailureKind.PLANNING, f"{what}: {result.reason}")
+    ctx.emit("arm_plan", what=what, planning_ms=round(result.planning_time * 1e3, 1), waypoints=len(result.path),
+             duration=round(result.trajectory.duration, 3), attempts=result.attempts, node=ctx.node_path)
+    return result
+
+
+def _execute(ctx: SkillContext, result: PlanResult, what: str) -> Generator[None, None, None]:
+    arm = ctx.robot.arm
+    assert arm is not None and result.trajectory is not None
+    goal = arm.follow(result.trajectory)
+    try:
+        yield from wait_goal(ctx, goal, timeout=result.trajectory.duration + 5.0)
+    except SkillFailure as e:
+        raise SkillFailure(e.kind, f"{what}: {e.reason}") from None
+
+
+def _named_q(ctx: SkillContext, name: str) -> list[float]:
+    poses = ctx.profile.get("named_poses") or {}
+    q = poses.get(name) if hasattr(poses, "get") else None
+    if q is None:
+        raise SkillFailure(FailureKind.PRECONDITION,
+                           f"no named arm pose {name!r} in the robot profile (known: {', '.join(sorted(poses)) or 'none'})")
+    return [float(x) for x in q]
+
+
+def move_named(ctx: SkillContext, name: str, *, cfg: PlannerConfig | None = None) -> Generator[None, None, None]:
+    """Plan (against the scene) and execute a move to the profile's named arm pose.
+    When the arm starts in collision with a scene item (it is touching it), the plan is
+    retried without the free items."""
+    ws = workspace(ctx)
+    ws.scene.set_static_boxes(ctx.robot.scene, _T_armbase_map(ctx))
+    q0, q1 = _q(ctx), _named_q(ctx, name)
+    if max(abs(a - b) for a, b in zip(q0, q1)) < 1e-3:
+        return
+    cfg = cfg or ws.config()
+    res = ws.planner.plan(q0, q1, cfg)
+    if not res.success and res.reason.startswith("start in collision"):
+        for it in [n for n, item in ws.scene.items.items() if not item.attached]:
+            ws.scene.remove_item(it)
+        res = ws.planner.plan(q0, q1, cfg)
+    if not res.success and res.reason.startswith("start in collision") and ws.scene.is_valid(q1):
+        pairs = ws.scene.collisions(q0)
+        if pairs and all(a.startswith("robot/") and b.startswith("robot/") for a, b in pairs):
+            # The arm rests in a pose the planning model counts as self-contact (the
+            # vendor's sleep pose touches the camera tower in the model): leave it along
+            # the straight joint-space line, which only the arm's own links are near.
+            log.info("arm starts in self-contact (%s); direct joint move to %s", pairs[0], name)
+            traj = time_parametrize(ws.kin.joint_names, [tuple(q0), tuple(q1)], ws.kin.limits,
+                                    velocity_scale=cfg.velocity_scale, acceleration_scale=cfg.acceleration_scale,
+                                    sample_period=cfg.sample_period)
+            res = PlanResult(True, "", 0.0, [tuple(q0), tuple(q1)], traj, 0)
+    _planned(ctx, res, f"arm to {name}")
+    yield from _execute(ctx, res, f"arm to {name}")
+
+
+def _item_pose_and_size(prof: FetchProfile, T_marker: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:
+    """Box centre pose (marker axes) and size along the marker's x, y, z for an item
+    whose marker is on its +x face: the box lies behind the face (along -z)."""
+    sx, sy, sz = prof.item_size
+    off = np.eye(4)
+    off[2, 3] = -sx / 2.0
+    return T_marker @ off, (sy, sz, sx)
+
+
+def _holding(ctx: SkillContext, min_width: float) -> tuple[bool, str]:
+    g = ctx.robot.gripper
+    assert g is not None
+    st = g.state()
+    if st.grasp is GraspState.CONTACT_CLOSING and st.width >= min_width:
+        return True, ""
+    return False, f"gripper {st.grasp.value} at {st.width * 1e3:.0f} mm"
+
+
+def _gripper(ctx: SkillContext, width: float | None, force: float) -> Generator[None, None, None]:
+    g = ctx.robot.gripper
+    assert g is not None
+    goal = g.open(force=force) if width is None else g.move(width, force=force)
+    yield from wait_goal(ctx, goal, timeout=10.0)
+
+
+def _status_wrap(ctx: SkillContext, body: Gen, what: str) -> Gen:
+    """Emit running/success/fail/idle around an arm routine."""
+    arm_status(ctx, "running", action=what)
+    try:
+        out = yield from body
+    except SkillFailure as e:
+        arm_status(ctx, "fail", action=what, reason=e.reason, kind=e.kind.value)
+        arm_status(ctx, "idle")
+        raise
+    except SkillCancelled:
+        arm_status(ctx, "idle")
+        raise
+    arm_status(ctx, "success", action=what)
+    arm_status(ctx, "idle")
+    return out
+
+
+# --------------------------------------------------------------------------- skills
+
+
+def _planner_params() -> list[Param]:
+    return [
+        Param("algorithm", str, doc="OMPL planner: 'rrtconnect' or 'rrtstar' (default: profile)"),
+        Param("time_limit", float, unit="s", doc="planning time per attempt (default: profile)"),
+        Param("attempts", int, doc="planning attempts (default: profile)"),
+    ]
+
+
+@skill(
+    "pick",
+    params=[Param("marker", int, required=True, doc="marker id of the item (its estimate is in the world model)"),
+            *_planner_params()],
+    outputs=[Output("item", str, doc="planning-scene name of the held item")],
+    needs=("arm", "gripper"),
+)
+def pick(ctx: SkillContext, marker: int, algorithm: str | None = None, time_limit: float | None = None,
+         attempts: int | None = None) -> Gen:
+    """Seed pick routine in the marker frame: add the item to the planning scene; plan to
+    the pre-grasp (profile fetch.pre_grasp, default (0, 0, 0.10) m); open; straight in to
+    the grasp (marker face, grasp_depth behind it, fingers horizontal); close; attach the
+    item; straight out to the retract pose; carry pose. POSTCONDITION "nothing held"
+    when the gripper closed on nothing."""
+    return (yield from _status_wrap(ctx, _pick(ctx, marker, algorithm, time_limit, attempts), f"pick marker {marker}"))
+
+
+def _pick(ctx: SkillContext, marker: int, algorithm: str | None, time_limit: float | None,
+          attempts: int | None) -> Gen:
+    prof = fetch_profile(ctx)
+    est = markers(ctx).get(marker)
+    if est is None:
+        raise SkillFailure(FailureKind.PRECONDITION, f"pick: no estimate of marker {marker} (detect it first)")
+    ws = workspace(ctx)
+    cfg = ws.config(algorithm, time_limit, attempts)
+    T_am = _T_armbase_map(ctx)
+    ws.scene.set_static_boxes(ctx.robot.scene, T_am)
+    T_am_marker = T_am @ est.T_map_marker
+    name = f"item_{marker}"
+    for old in [n for n in ws.scene.items]:
+        ws.scene.remove_item(old)
+    T_item, size = _item_pose_and_size(prof, T_am_marker)
+    ws.scene.add_item(name, size, T_item)
+    ctx.emit("scene_update", op="add", item=name, node=ctx.node_path)
+    poses = grasp_poses(T_am_marker, ws.kin.approach_axis, pre_grasp=prof.pre_grasp, grasp_depth=prof.grasp_depth,
+                        retract=prof.retract)
+    q = _q(ctx)
+    pre = _planned(ctx, ws.planner.plan_to_pose(q, poses.pre_grasp, config=cfg), "pre-grasp")
+    yield from _gripper(ctx, None, prof.grasp_force)
+    yield from _execute(ctx, pre, "pre-grasp")
+    # the fingers must touch the item: take it out of the scene for the straight approach
+    ws.scene.remove_item(name)
+    grasp = _planned(ctx, ws.planner.cartesian_path(_q(ctx), poses.grasp, config=cfg), "grasp approach")
+    yield from _execute(ctx, grasp, "grasp approach")
+    g = ctx.robot.gripper
+    assert g is not None
+    yield from wait_goal(ctx, g.close(force=prof.grasp_force), timeout=10.0)
+    held, why = _holding(ctx, prof.min_held_width)
+    if not held:
+        yield from _gripper(ctx, None, prof.grasp_force)
+        raise SkillFailure(FailureKind.POSTCONDITION, f"nothing held after closing on marker {marker} ({why})")
+    q_grasp = _q(ctx)
+    ws.scene.add_item(name, size, T_item)
+    ws.scene.attach_item(name, q_grasp)
+    ctx.world[WORLD_HELD] = name
+    ctx.emit("scene_update", op="attach", item=name, node=ctx.node_path)
+    out = _planned(ctx, ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg), "retract")
+    yield from _execute(ctx, out, "retract")
+    yield from move_named(ctx, prof.arm.carry, cfg=cfg)
+    held, why = _holding(ctx, prof.min_held_width)
+    if not held:
+        raise SkillFailure(FailureKind.POSTCONDITION, f"item of marker {marker} lost after lifting it ({why})")
+    return {"item": name}
+
+
+def _place_frame(place: Sequence[float], base_xy: tuple[float, float]) -> np.ndarray:
+    """Place frame in map (marker convention): origin at ``place``, z horizontal towards
+    the base, y up, x = y x z."""
+    px, py, pz = (float(v) for v in place)
+    z = np.array([base_xy[0] - px, base_xy[1] - py, 0.0])
+    n = float(np.linalg.norm(z))
+    z = z / n if n > 1e-6 else np.array([1.0, 0.0, 0.0])
+    y = np.array([0.0, 0.0, 1.0])
+    x = np.cross(y, z)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = x, y, z, (px, py, pz)
+    return T
+
+
+@skill("place", params=_planner_params(), outputs=[Output("item", str, doc="the item released")],
+       needs=("arm", "gripper"))
+def place(ctx: SkillContext, algorithm: str | None = None, time_limit: float | None = None,
+          attempts: int | None = None) -> Gen:
+    """Seed place routine at the depot (the base must be at the depot pose): plan to the
+    place pose (profile fetch.depot.place, the item's centre); open; detach and remove
+    the item from the planning scene; retract (profile fetch.place_retract, default
+    (0, 0, 0.10) m in the place frame); close; stow the arm."""
+    return (yield from _status_wrap(ctx, _place(ctx, algorithm, time_limit, attempts), "place"))
+
+
+def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, attempts: int | None) -> Gen:
+    prof = fetch_profile(ctx)
+    held, why = _holding(ctx, prof.min_held_width)
+    if not held:
+        raise SkillFailure(FailureKind.PRECONDITION, f"place: nothing held ({why})")
+    ws = workspace(ctx)
+    cfg = ws.config(algorithm, time_limit, attempts)
+    T_am = _T_armbase_map(ctx)
+    ws.scene.set_static_boxes(ctx.robot.scene, T_am)
+    name = str(ctx.world.get(WORLD_HELD, "item"))
+    base = ctx.robot.base
+    bp = base.state().pose if base is not None else None
+    T_map_place = _place_frame(prof.depot.place, (bp.x, bp.y) if bp is not None else (0.0, 0.0))
+    poses = place_poses(T_am @ T_map_place, ws.kin.approach_axis, retract=prof.place_retract)
+    res = _planned(ctx, ws.planner.plan_to_pose(_q(ctx), poses.place, config=cfg), "place pose")
+    yield from _execute(ctx, res, "place pose")
+    yield from _gripper(ctx, None, prof.grasp_force)
+    q = _q(ctx)
+    if name in ws.scene.items:
+        ws.scene.detach_item(name, q)
+        ws.scene.remove_item(name)
+        ctx.emit("scene_update", op="detach_remove", item=name, node=ctx.node_path)
+    ctx.world.pop(WORLD_HELD, None)
+    back = _planned(ctx, ws.planner.cartesian_path(q, poses.retract, config=cfg), "place retract")
+    yield from _execute(ctx, back, "place retract")
+    g = ctx.robot.gripper
+    assert g is not None
+    yield from wait_goal(ctx, g.close(force=prof.grasp_force), timeout=10.0)
+    yield from move_named(ctx, prof.arm.stow, cfg=cfg)
+    return {"item": name}
+
+
+@skill(
+    "arm_pose",
+    params=[
+        Param("pose", str, doc="named pose from the profile's named_poses (instead of 'role')"),
+        Param("role", str, default="stow", choices=("stow", "carry", "look"),
+              doc="the profile's fetch.arm pose for this role; 'look' falls back to 'stow' when the "
+                  "camera is not on the arm"),
+        *_planner_params(),
+    ],
+    needs=("arm",),
+)
+def arm_pose(ctx: SkillContext, pose: str | None = None, role: str = "stow", algorithm: str | None = None,
+             time_limit: float | None = None, attempts: int | None = None) -> Gen:
+    """Move the arm to a named pose along a collision-free planned path (the static
+    scene and any perceived items): stow it before the base moves, or point an
+    arm-mounted camera forward before a search."""
+    prof = fetch_profile(ctx)
+    if pose is not None:
+        target = pose
+    elif role == "look":
+        target = prof.arm.look or prof.arm.stow
+    else:
+        target = prof.arm.carry if role == "carry" else prof.arm.stow
+    ws = workspace(ctx)
+    return (yield from _status_wrap(ctx, _arm_pose(ctx, target, ws.config(algorithm, time_limit, attempts)),
+                                    f"arm to {target}"))
+
+
+def _arm_pose(ctx: SkillContext, target: str, cfg: PlannerConfig) -> Gen:
+    yield from move_named(ctx, target, cfg=cfg)
+    return {}

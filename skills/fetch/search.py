@@ -1,0 +1,131 @@
+"""The seed paper's search phase.
+
+If the requested marker is not in view, the robot turns in place in ``step`` degree
+steps (30 by default) clockwise through a full turn, stopping, settling and checking the
+camera at each step; if the marker is still not found it drives (A*) to the next search
+location of the list and repeats; it stops as soon as the marker is seen. The estimate
+(averaged over a few frames) goes to the world model like ``detect_marker``'s.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Generator
+from typing import Any
+
+from mmexec.drivers.interfaces import Pose2D
+from mmexec.skills.base import FailureKind, Output, Param, SkillContext, SkillFailure, skill
+from mmexec.skills.fetch.common import (
+    WORLD_SEARCH,
+    SearchProgress,
+    brake,
+    fetch_profile,
+    named_base_pose,
+    pose_list,
+)
+from mmexec.skills.fetch.detect import look
+from mmexec.skills.fetch.navigate import drive_path, rotate_by
+
+__all__ = ["search"]
+
+log = logging.getLogger(__name__)
+
+
+def _locations(ctx: SkillContext, given: list[Any] | None) -> list[tuple[Pose2D, str]]:
+    raw = given if given else [list(p) for p in fetch_profile(ctx).search_locations]
+    out = []
+    for i, loc in enumerate(raw):
+        if isinstance(loc, str):
+            out.append((named_base_pose(ctx, loc), loc))
+        else:
+            out.append((pose_list(loc, f"search: locations[{i}]"), f"search location {i + 1}"))
+    return out
+
+
+def _settle(ctx: SkillContext, seconds: float) -> Generator[None, None, None]:
+    base = ctx.robot.base
+    assert base is not None
+    rested = yield from brake(ctx, base)
+    if not rested:
+        raise SkillFailure(FailureKind.EXECUTION, "search: the base did not come to rest")
+    end = ctx.clock.now() + seconds
+    while ctx.clock.now() < end - 1e-9:
+        base.stop()
+        yield
+
+
+@skill(
+    "search",
+    params=[
+        Param("marker", int, required=True, doc="ArUco id to search for"),
+        Param("step", float, unit="deg", doc="rotation step, clockwise (default: profile fetch.search_step_deg)"),
+        Param("turn", float, unit="deg", default=360.0, doc="total rotation at each location"),
+        Param("locations", list, doc="search locations after the current one: [x, y, theta] in map or "
+                                     "named poses (default, or an empty list: profile fetch.search_locations)"),
+        Param("max_locations", int, doc="visit at most this many locations from the list"),
+        Param("frames", int, doc="frames averaged once found (default: profile fetch.detect_frames)"),
+        Param("settle", float, unit="s", doc="wait after each step before capturing (default: profile fetch.settle_time)"),
+        Param("timeout", float, unit="s", default=300.0, doc="give up after this much clock time"),
+    ],
+    outputs=[
+        Output("pose", list, doc="[x, y, z, yaw] of the marker in map [m, rad]"),
+        Output("views", int, doc="camera views checked"),
+    ],
+    needs=("base", "camera"),
+)
+def search(ctx: SkillContext, marker: int, step: float | None = None, turn: float = 360.0,
+           locations: list[Any] | None = None, max_locations: int | None = None, frames: int | None = None,
+           settle: float | None = None, timeout: float = 300.0) -> Generator[None, None, dict[str, Any]]:
+    """Find marker ``marker``: check the camera; turn clockwise in steps through ``turn``
+    degrees checking at each step; then go to the next search location and repeat.
+    EXECUTION "marker K not found ..." when every location was searched."""
+    prof = fetch_profile(ctx)
+    step_deg = prof.search_step_deg if step is None else step
+    if not 1.0 <= step_deg <= 180.0 or not 0.0 <= turn <= 720.0:
+        raise SkillFailure(FailureKind.PRECONDITION, f"search: step {step_deg:g} deg must be in 1..180 and turn in 0..720")
+    n_frames = prof.detect_frames if frames is None else frames
+    settle_s = prof.settle_time if settle is None else settle
+    locs = _locations(ctx, locations)
+    if max_locations is not None:
+        locs = locs[:max(0, max_locations)]
+    progress = SearchProgress(marker)
+    ctx.world[WORLD_SEARCH] = progress
+    base = ctx.robot.base
+    assert base is not None
+    deadline = ctx.clock.now() + timeout
+    # an arm-mounted camera must look forward first
+    look_pose = prof.arm.look
+    if look_pose is not None and ctx.robot.arm is not None:
+        from mmexec.skills.fetch.arm import move_named
+
+        yield from move_named(ctx, look_pose)
+    n_steps = int(math.floor(turn / step_deg + 1e-9))
+    stops: list[tuple[Pose2D, str] | None] = [None] + list(locs)
+    for stop in stops:
+        if stop is not None:
+            pose, label = stop
+            yield from drive_path(ctx, pose, label, timeout=max(1.0, deadline - ctx.clock.now()))
+            progress.locations_visited += 1
+        for k in range(n_steps + 1):
+            if k > 0:
+                if step_deg * k >= 360.0 - 1e-6:
+                    break  # a full turn looks at the first view again
+                yield from rotate_by(ctx, -math.radians(step_deg))
+            yield from _settle(ctx, settle_s)
+            progress.views += 1
+            est = yield from look(ctx, marker, n_frames)
+            if est is not None:
+                p = base.state().pose
+                progress.found_at = (p.x, p.y, p.theta)
+                ctx.emit("search_found", marker=marker, views=progress.views,
+                         locations=progress.locations_visited, pose=[round(v, 4) for v in est.as_list()],
+                         node=ctx.node_path)
+                return {"pose": est.as_list(), "views": progress.views}
+            if ctx.clock.now() > deadline:
+                raise SkillFailure(FailureKind.EXECUTION,
+                                   f"search: marker {marker} not found within {timeout:g} s ({progress.views} views)")
+    raise SkillFailure(FailureKind.EXECUTION,
+                       f"marker {marker} not found: {progress.views} views at {progress.locations_visited + 1} locations")
+
+
