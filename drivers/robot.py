@@ -11,7 +11,10 @@ Section schema (every device optional; see docs/drivers/bringup.md)::
                # or {kind: robotiq_rtu, port: /dev/ttyUSB0, slave: 9, max_force: 100, activate: true}
                # or {kind: robotiq_urcap, host: 192.168.1.10, ...}
       camera:  {kind: uvc | realsense, device: 0, width: 640, height: 480, fps: 30,
-                intrinsics: {fx, fy, cx, cy, dist}, mount: {xyz: [..], rpy: [..]}}
+                intrinsics: {fx, fy, cx, cy, dist} | hfov: RAD, frame_timeout: 0.5,
+                pose_in_base: {xyz: [..], rpy: [..]}, mount_link: base_link | tool0}
+               # ...CameraConfig keys (docs/drivers/camera.md); mount_link tool0 = wrist
+               # camera on a UR arm, pose_in_base then being T_tool0_camera
       map:     {yaml: maps/lab.yaml}                           # map_server YAML + PGM
       scene:   [{name: shelf, size: [x, y, z], xyz: [..], rpy: [..]}]   # static boxes in map
 
@@ -19,8 +22,10 @@ Two phases, as everywhere in mmexec: the whole section is bound and checked firs
 (every problem reported as ``FILE:LINE:COL: robot.key: message``), then devices are
 constructed lazily by ``kind`` through :data:`DEVICE_KINDS` (driver modules are
 imported only when a config names them) and connected in order base, arm, gripper,
-camera. A device that does not answer raises :class:`DeviceUnavailable`, a one-line
-error naming the config line, the device and its port, after closing what was opened.
+camera. Before the first device is opened, the driver objects that need an optional
+extra are constructed (no I/O), so a missing ``pyrealsense2`` fails at once. A device that
+does not answer raises :class:`DeviceUnavailable`, a one-line error naming the config
+line, the device and its port, after closing what was opened.
 Relative paths (``map.yaml``) are relative to the config file.
 """
 
@@ -38,7 +43,14 @@ from typing import Any
 
 import numpy as np
 from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, did_you_mean
-from mmexec.drivers.interfaces import MonotonicClock, OccupancyGrid, Pose2D, Robot, SceneBox
+from mmexec.drivers.interfaces import (
+    CapabilityError,
+    MonotonicClock,
+    OccupancyGrid,
+    Pose2D,
+    Robot,
+    SceneBox,
+)
 
 __all__ = [
     "DEVICE_KINDS",
@@ -140,46 +152,6 @@ class SceneBoxSection:
         return [] if all(s > 0 for s in self.size) else [f"size: every extent must be > 0 m, got {list(self.size)}"]
 
 
-@dataclass(frozen=True)
-class MountSection:
-    """Sensor mount in ``base_link``: ``xyz`` [m], ``rpy`` [rad] (fixed axes, roll first)."""
-
-    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-
-@dataclass(frozen=True)
-class IntrinsicsSection:
-    """Pinhole intrinsics [px] and OpenCV distortion coefficients."""
-
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    dist: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0, 0.0, 0.0])
-
-
-@dataclass(frozen=True)
-class CameraSection:
-    """``camera:`` for ``kind: uvc`` (OpenCV VideoCapture) or ``realsense`` (pyrealsense2)."""
-
-    kind: str
-    device: int | str = 0
-    width: int = 640
-    height: int = 480
-    fps: float = 30.0
-    intrinsics: IntrinsicsSection | None = None
-    mount: MountSection = field(default_factory=MountSection)
-
-    def validate(self) -> list[str]:
-        out = []
-        if self.width < 1 or self.height < 1:
-            out.append(f"width/height: expected positive pixel counts, got {self.width}x{self.height}")
-        if not self.fps > 0:
-            out.append(f"fps: must be > 0, got {self.fps}")
-        return out
-
-
 def pose_matrix(xyz: tuple[float, float, float], rpy: tuple[float, float, float]) -> np.ndarray:
     """4x4 transform from a translation [m] and roll, pitch, yaw [rad] (R = Rz Ry Rx)."""
     r, p, y = rpy
@@ -204,6 +176,8 @@ class _Ctx:
     robot: RealRobot
     problems: Problems
     devices: dict[str, Any] = field(default_factory=dict)   # slot -> driver device object
+    #: checks without I/O that build() runs before opening any device (optional extras)
+    prepare: list[Callable[[], None]] = field(default_factory=list)
 
 
 #: a planned device: (slot, label for errors, mark, connect function returning the capability)
@@ -368,30 +342,96 @@ def _ur(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
         ctx.robot.add_closer(where, arm.close)
         return arm
 
+    ctx.devices["ur_model"] = cfg.model
     return ("arm", where, section.mark, connect)
 
 
-def _unavailable(kind: str, module: str) -> _Factory:
-    """Factory for a kind whose driver is written elsewhere and not wired here yet."""
+@dataclass(frozen=True)
+class _MountLink:
+    """Camera key next to the :class:`CameraConfig` ones: the link ``pose_in_base`` is
+    relative to: ``base_link`` (fixed on the robot) or ``tool0`` (a wrist camera riding on
+    the arm's flange; ``pose_in_base`` is then the hand-eye calibration ``T_tool0_camera``)."""
 
-    def factory(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
-        _import(module, f"kind {kind!r}", section.value_mark("kind"), path)
-        raise InputError.at(
-            section.value_mark("kind"),
-            f"{path}.kind: {kind!r} is not supported by the robot backend yet ({module} exists but is not wired in)",
-        )
-
-    return factory
+    mount_link: str = "base_link"
 
 
-def _camera(kind: str) -> _Factory:
-    def factory(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
-        cam = bind(CameraSection, section, section.mark, path, ctx.problems)
-        if cam is None:
-            return None
-        return _unavailable(kind, f"mmexec.drivers.camera.{kind}")(section, path, ctx)
+_MOUNT_LINKS = ("base_link", "tool0")
 
-    return factory
+
+def _camera(section: YDict, path: str, ctx: _Ctx, *, kind: str) -> _Plan | None:
+    """``uvc`` (OpenCV VideoCapture) or ``realsense`` (pyrealsense2): a
+    :class:`~mmexec.drivers.camera.config.CameraConfig` plus ``kind`` and ``mount_link``."""
+    from mmexec.drivers.camera.config import CameraConfig
+    from mmexec.drivers.camera.errors import CameraError
+
+    mark = section.value_mark("kind")
+    mod = _import(f"mmexec.drivers.camera.{kind}", f"kind {kind!r}", mark, path)
+    cfg_part, link_part = _split(_without(section, "kind"), CameraConfig, _MountLink)
+    before = len(ctx.problems)
+    cfg = bind(CameraConfig, cfg_part, section.mark, path, ctx.problems)
+    link = bind(_MountLink, link_part, section.mark, path, ctx.problems)
+    if cfg is None or link is None or len(ctx.problems) > before:
+        return None
+    for name, message in cfg.problems():
+        ctx.problems.add(cfg_part.value_mark(name) if name in cfg_part else section.mark, f"{path}.{name}: {message}")
+    if kind == "uvc" and cfg.camera_intrinsics() is None:
+        ctx.problems.add(section.mark, f"{path}: a uvc camera needs 'intrinsics' (fx, fy, cx, cy) or 'hfov' [rad]")
+    link_pose: Callable[[], np.ndarray] | None = None
+    if link.mount_link not in _MOUNT_LINKS:
+        ctx.problems.add(link_part.value_mark("mount_link"), f"{path}.mount_link: unknown link {link.mount_link!r}"
+                         + (did_you_mean(link.mount_link, _MOUNT_LINKS) or f" (expected one of: {', '.join(_MOUNT_LINKS)})"))
+    elif link.mount_link == "tool0":
+        if "ur_model" not in ctx.devices:
+            ctx.problems.add(link_part.value_mark("mount_link"),
+                             f"{path}.mount_link: 'tool0' needs 'arm: {{kind: ur}}' (the arm carrying the camera)")
+        else:
+            link_pose = functools.partial(_ur_tool0_in_base, ctx.robot, ctx.devices["ur_model"])
+    if len(ctx.problems) > before:
+        return None
+    robot = ctx.robot
+    camera_type = mod.UVCCamera if kind == "uvc" else mod.RealSenseCamera
+    where = f"{kind} {cfg.device}"
+    made: list[Any] = []
+
+    def base_pose() -> np.ndarray:
+        """``T_map_base`` from the base's odometry; identity on a robot without a base."""
+        return robot.base.state().pose.matrix() if robot.base is not None else np.eye(4)
+
+    def prepare() -> None:
+        # construction does no I/O but needs the optional extras (pyrealsense2): checked
+        # before any device is opened, so a missing package costs no bring-up
+        try:
+            made.append(camera_type(cfg, clock=robot.clock, base_pose=base_pose, link_pose=link_pose))
+        except CameraError as e:
+            raise _connect_error(path, section.mark, f"{where}: {e}") from e
+
+    def connect() -> Any:
+        if not made:
+            prepare()
+        camera = made[-1]
+        try:
+            camera.open()
+        except CameraError as e:
+            camera.close()
+            raise _connect_error(path, section.mark, str(e)) from e
+        robot.add_closer(where, camera.close)
+        return camera
+
+    ctx.prepare.append(prepare)
+
+    return ("camera", where, section.mark, connect)
+
+
+def _ur_tool0_in_base(robot: RealRobot, model: str) -> np.ndarray:
+    """``T_base_tool0`` of the robot's UR arm from its latest joint state (forward
+    kinematics, independent of the TCP set on the controller)."""
+    from mmexec.drivers.ur import model as urmodel
+
+    arm = robot.arm
+    if arm is None:
+        raise CapabilityError("the arm carrying the camera is not connected")
+    q = arm.state().positions
+    return arm.mount @ urmodel.T_BASELINK_BASE @ urmodel.forward_kinematics(q, model)
 
 
 #: slot -> kind -> factory (import of the driver module happens inside the factory)
@@ -403,7 +443,10 @@ DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
         "robotiq_rtu": functools.partial(_robotiq, kind="robotiq_rtu"),
         "robotiq_urcap": functools.partial(_robotiq, kind="robotiq_urcap"),
     },
-    "camera": {"uvc": _camera("uvc"), "realsense": _camera("realsense")},
+    "camera": {
+        "uvc": functools.partial(_camera, kind="uvc"),
+        "realsense": functools.partial(_camera, kind="realsense"),
+    },
 }
 
 _TOP_KEYS = ("name", "base", "arm", "gripper", "camera", "map", "scene")
@@ -425,7 +468,9 @@ def build(
     Raises :class:`InputError` for a bad section (all problems at once, before any port
     is opened) and :class:`DeviceUnavailable` for a device that cannot be brought up.
     """
-    robot, plans = _plan(section, profile)
+    robot, plans, prepare = _plan(section, profile)
+    for step in prepare:
+        step()
     try:
         for slot, label, _mark, connect in plans:
             log.info("robot: bringing up %s: %s", slot, label)
@@ -439,11 +484,13 @@ def build(
 def check(section: YDict | None, *, profile: Mapping[str, Any] | None = None) -> list[str]:
     """Validate a ``robot:`` section without opening any port: returns the devices it
     would bring up (``"base: kobuki on /dev/kobuki"``, ...) or raises InputError."""
-    robot, plans = _plan(section, profile or {})
+    _robot, plans, _prepare = _plan(section, profile or {})
     return [f"{slot}: {label}" for slot, label, _m, _c in plans]
 
 
-def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot, list[_Plan]]:
+def _plan(
+    section: YDict | None, profile: Mapping[str, Any]
+) -> tuple[RealRobot, list[_Plan], list[Callable[[], None]]]:
     if section is None or not isinstance(section, YDict):
         mark = getattr(section, "mark", Mark("<config>", 1, 1))
         raise InputError.at(mark, "robot: missing section (expected a mapping with base / arm / gripper / camera)")
@@ -485,7 +532,7 @@ def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot,
     robot.occupancy = _load_map(section, problems)
     robot.scene = _load_scene(section, problems)
     problems.raise_if_any()
-    return robot, plans
+    return robot, plans, ctx.prepare
 
 
 def _load_map(section: YDict, problems: Problems) -> OccupancyGrid | None:

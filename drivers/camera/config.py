@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
 from mmexec.config.yamlload import (
     InputError,
     Mark,

@@ -19,7 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from mmexec.drivers.camera.errors import CameraError
-from mmexec.drivers.interfaces import Camera, CameraFrame, CameraIntrinsics, Clock, MonotonicClock
+from mmexec.drivers.interfaces import (
+    Camera,
+    CameraFrame,
+    CameraIntrinsics,
+    CapabilityError,
+    Clock,
+    MonotonicClock,
+)
 
 __all__ = ["CameraHealth", "GrabbingCamera"]
 
@@ -39,17 +46,25 @@ class CameraHealth:
 
 
 class GrabbingCamera(Camera):
-    """Camera capability fed by a grabber thread. Construction does no I/O: :meth:`open`."""
+    """Camera capability fed by a grabber thread. Construction does no I/O: :meth:`open`.
+
+    ``T_base_camera`` is the optical frame in the mount's parent: ``base_link`` by
+    default, or the link given by ``link_pose`` (a callable returning ``T_base_link``
+    4x4 at grab time, e.g. an arm's ``tool0`` for a wrist camera). ``base_pose`` returns
+    ``T_map_base`` at grab time. Both are called on the grabber thread and must not block.
+    """
 
     def __init__(self, name: str, intrinsics: CameraIntrinsics | None, T_base_camera: np.ndarray,
                  frame_timeout: float, clock: Clock | None = None,
-                 base_pose: Callable[[], np.ndarray] | None = None) -> None:
+                 base_pose: Callable[[], np.ndarray] | None = None,
+                 link_pose: Callable[[], np.ndarray] | None = None) -> None:
         self.name = name
         self._intrinsics = intrinsics
         self._T_base_camera = np.array(T_base_camera, dtype=float)
         self.frame_timeout = frame_timeout
         self.clock: Clock = clock or MonotonicClock()
         self._base_pose = base_pose
+        self._link_pose = link_pose
         self._lock = threading.Lock()
         self._latest: CameraFrame | None = None
         self._frames = 0
@@ -106,6 +121,10 @@ class GrabbingCamera(Camera):
         return self._intrinsics
 
     def pose_in_base(self) -> np.ndarray:
+        """``T_base_camera`` now: the configured mount, moved by the parent link's pose
+        when the camera rides on one (a wrist camera)."""
+        if self._link_pose is not None:
+            return self._link_pose() @ self._T_base_camera
         return self._T_base_camera.copy()
 
     def frame(self) -> CameraFrame | None:
@@ -158,9 +177,14 @@ class GrabbingCamera(Camera):
                 continue
             if intr is None:
                 continue
-            T_map_base = self._base_pose() if self._base_pose is not None else np.eye(4)
-            frame = CameraFrame(rgb, depth, intr, self.clock.now(), self._T_base_camera.copy(),
-                                T_map_base)
+            try:
+                T_map_base = self._base_pose() if self._base_pose is not None else np.eye(4)
+                T_base_camera = self.pose_in_base()
+            except CapabilityError as e:  # the base or the carrying arm went away
+                self._set_error(f"{self.name}: frame pose unknown: {e}")
+                self._stop.wait(0.05)
+                continue
+            frame = CameraFrame(rgb, depth, intr, self.clock.now(), T_base_camera, T_map_base)
             with self._lock:
                 self._latest = frame
                 self._frames += 1

@@ -14,7 +14,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-
 from mmexec.drivers.camera.config import CameraConfig
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.camera.grabber import GrabbingCamera
@@ -33,6 +32,7 @@ class RealSenseCamera(GrabbingCamera):
 
     def __init__(self, config: CameraConfig, *, clock: Clock | None = None,
                  base_pose: Callable[[], np.ndarray] | None = None,
+                 link_pose: Callable[[], np.ndarray] | None = None,
                  wait_ms: int = 200) -> None:
         try:
             import pyrealsense2 as rs
@@ -43,7 +43,7 @@ class RealSenseCamera(GrabbingCamera):
             field, message = problems[0]
             raise CameraError(f"realsense {config.device}: {field}: {message}")
         super().__init__(f"realsense {config.device}", config.camera_intrinsics(),
-                         config.pose_in_base.matrix(), config.frame_timeout, clock, base_pose)
+                         config.pose_in_base.matrix(), config.frame_timeout, clock, base_pose, link_pose)
         self.config = config
         self._rs: Any = rs
         self._wait_ms = wait_ms
@@ -57,7 +57,7 @@ class RealSenseCamera(GrabbingCamera):
         rcfg = rs.config()
         if isinstance(cfg.device, str) and cfg.device not in ("", "0"):
             rcfg.enable_device(cfg.device)
-        fps = int(round(cfg.fps))
+        fps = round(cfg.fps)
         rcfg.enable_stream(rs.stream.color, cfg.width, cfg.height, rs.format.rgb8, fps)
         rcfg.enable_stream(rs.stream.depth, cfg.width, cfg.height, rs.format.z16, fps)
         try:

@@ -15,7 +15,6 @@ from typing import Any, Protocol
 
 import cv2
 import numpy as np
-
 from mmexec.drivers.camera.config import CameraConfig
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.camera.grabber import GrabbingCamera
@@ -29,7 +28,7 @@ log = logging.getLogger(__name__)
 class Capture(Protocol):
     """The part of ``cv2.VideoCapture`` the camera uses."""
 
-    def isOpened(self) -> bool: ...  # noqa: N802 - OpenCV's name
+    def isOpened(self) -> bool: ...
     def read(self) -> tuple[bool, Any]: ...
     def set(self, prop: int, value: float) -> bool: ...
     def release(self) -> None: ...
@@ -44,7 +43,8 @@ class UVCCamera(GrabbingCamera):
 
     def __init__(self, config: CameraConfig, *, clock: Clock | None = None,
                  capture_factory: Callable[[int | str], Capture] | None = None,
-                 base_pose: Callable[[], np.ndarray] | None = None) -> None:
+                 base_pose: Callable[[], np.ndarray] | None = None,
+                 link_pose: Callable[[], np.ndarray] | None = None) -> None:
         problems = config.problems()
         if problems:
             field, message = problems[0]
@@ -54,7 +54,7 @@ class UVCCamera(GrabbingCamera):
             raise CameraError(f"camera {config.device}: a UVC camera needs intrinsics "
                               "(fx, fy, cx, cy) or hfov in its config")
         super().__init__(f"camera {config.device}", intr, config.pose_in_base.matrix(),
-                         config.frame_timeout, clock, base_pose)
+                         config.frame_timeout, clock, base_pose, link_pose)
         self.config = config
         self._factory = capture_factory or _default_capture
         self._cap: Capture | None = None

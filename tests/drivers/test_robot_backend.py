@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from mmexec.config.yamlload import InputError
 from mmexec.drivers import robot as rb
 from mmexec.drivers.fakes.kobuki import KobukiFake
@@ -184,6 +183,7 @@ def test_shipped_locobot_config_is_valid() -> None:
     assert loaded.config.profile["named_poses"]["sleep"] == [0.0, -1.1, 1.55, 0.0, 0.5, 0.0]
     assert rb.check(loaded.section(), profile=loaded.config.profile) == [
         "base: kobuki on /dev/kobuki", "arm: wx250s on /dev/ttyDXL", "gripper: wx250s gripper",
+        "camera: realsense 0",
     ]
 
 
@@ -191,7 +191,7 @@ def test_shipped_ur5e_config_loads() -> None:
     loaded = load_config(REPO / "config" / "ur5e.yaml")
     assert loaded.backend == "robot"
     assert rb.check(loaded.section(), profile=loaded.config.profile) == [
-        "arm: ur5e at 192.168.1.10", "gripper: robotiq on 192.168.1.10:63352",
+        "arm: ur5e at 192.168.1.10", "gripper: robotiq on 192.168.1.10:63352", "camera: realsense 0",
     ]
     assert len(loaded.config.profile["named_poses"]["home"]) == 6
 
