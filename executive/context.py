@@ -18,7 +18,6 @@ __all__ = ["ExecContext", "drop_event"]
 
 def drop_event(event: str, **fields: Any) -> None:
     """An event sink that discards everything (the default)."""
-    return None
 
 
 @dataclass

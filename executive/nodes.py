@@ -274,6 +274,12 @@ class _Chain(MissionNode):
     reactive = False
     _index = 0
 
+    def __init__(self, rt: Runtime, path: str, name: str, children: list[Any], reactive: bool = False) -> None:
+        self._mn_init(rt, path, name, children)
+        self.memory = not reactive
+        self.current_child = None
+        self.reactive = reactive
+
     def _start(self) -> None:
         self._index = 0
 
@@ -309,12 +315,6 @@ class Sequence(_Chain, py_trees.composites.Sequence):
 
     _advance_on = SUCCESS
 
-    def __init__(self, rt: Runtime, path: str, name: str, children: list[Any], reactive: bool = False) -> None:
-        self._mn_init(rt, path, name, children)
-        self.memory = not reactive
-        self.current_child = None
-        self.reactive = reactive
-
 
 class Fallback(_Chain, py_trees.composites.Selector):
     """Children in order until one does not fail. ``reactive``: restart from the first
@@ -322,12 +322,6 @@ class Fallback(_Chain, py_trees.composites.Selector):
     running lower-priority one."""
 
     _advance_on = FAILURE
-
-    def __init__(self, rt: Runtime, path: str, name: str, children: list[Any], reactive: bool = False) -> None:
-        self._mn_init(rt, path, name, children)
-        self.memory = not reactive
-        self.current_child = None
-        self.reactive = reactive
 
 
 class Parallel(MissionNode, py_trees.composites.Parallel):

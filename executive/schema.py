@@ -10,6 +10,7 @@ documented in docs/missions.md.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,12 +34,12 @@ from mmexec.skills.base import Param, SkillRegistry, SkillSpec
 __all__ = [
     "COMPOSITES",
     "DECORATORS",
-    "FileSpec",
     "NODE_TYPES",
-    "NodeSpec",
-    "ParamDecl",
     "SIZE_CAP",
     "TYPE_NAMES",
+    "FileSpec",
+    "NodeSpec",
+    "ParamDecl",
     "parse_file",
     "recovery_key_prefix",
 ]
@@ -387,10 +388,15 @@ class _Parser:
 
     def seconds(self, spec: NodeSpec, raw: Any, mark: Mark, what: str, positive: bool) -> Expr | None:
         if isinstance(raw, (int, float)) and not isinstance(raw, bool):
-            if raw < 0 or (positive and raw == 0) or raw != raw or raw == float("inf"):
-                self.err(mark, f"{what}: expected a number of seconds {'> 0' if positive else '>= 0'}, got {raw!r}")
+            try:
+                secs = float(raw)
+            except OverflowError:  # an integer too large for a float
+                secs = math.inf
+            if not math.isfinite(secs) or secs < 0 or (positive and secs == 0):
+                got = "an integer too large for a float" if isinstance(raw, int) and secs == math.inf else repr(raw)
+                self.err(mark, f"{what}: expected a number of seconds {'> 0' if positive else '>= 0'}, got {got}")
                 return None
-            return Const(float(raw))
+            return Const(secs)
         if isinstance(raw, str) and "{" in raw:
             e = self.value(raw, mark, what)
             if e is not None:
