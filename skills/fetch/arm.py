@@ -254,6 +254,24 @@ def pick(ctx: SkillContext, marker: int, algorithm: str | None = None, time_limi
 
 def _pick(ctx: SkillContext, marker: int, algorithm: str | None, time_limit: float | None,
           attempts: int | None) -> Gen:
+    try:
+        return (yield from _pick_steps(ctx, marker, algorithm, time_limit, attempts))
+    except SkillFailure:
+        # leave nothing half-done for the recovery: release what the gripper may hold and
+        # clear the scene of the item (a retry perceives and adds it again)
+        ws = ctx.world.get(WORLD_ARM)
+        if isinstance(ws, ArmWorkspace):
+            for name in list(ws.scene.items):
+                ws.scene.remove_item(name)
+        ctx.world.pop(WORLD_HELD, None)
+        g = ctx.robot.gripper
+        if g is not None and g.state().holding:
+            yield from _gripper(ctx, None, fetch_profile(ctx).grasp_force)
+        raise
+
+
+def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limit: float | None,
+                attempts: int | None) -> Gen:
     prof = fetch_profile(ctx)
     est = markers(ctx).get(marker)
     if est is None:
@@ -291,8 +309,17 @@ def _pick(ctx: SkillContext, marker: int, algorithm: str | None, time_limit: flo
     ws.scene.attach_item(name, q_grasp)
     ctx.world[WORLD_HELD] = name
     ctx.emit("scene_update", op="attach", item=name, node=ctx.node_path)
-    out = _planned(ctx, ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg), "retract")
+    line = ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg)
+    if not line.success:  # the straight line folds the arm into itself: plan a way instead
+        log.info("retract: %s; planning to the retract pose", line.reason)
+        line = ws.planner.plan_to_pose(q_grasp, poses.retract, config=cfg)
+    out = _planned(ctx, line, "retract")
     yield from _execute(ctx, out, "retract")
+    if ctx.robot.base is not None:
+        # leave the shelf before folding the arm: the carry pose sticks out in front
+        from mmexec.skills.fetch.navigate import back_off
+
+        yield from back_off(ctx, prof.back_off)
     yield from move_named(ctx, prof.arm.carry, cfg=cfg)
     held, why = _holding(ctx, prof.min_held_width)
     if not held:

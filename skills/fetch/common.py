@@ -139,7 +139,7 @@ class FetchProfile:
     base-recovery indexes them); ``search_locations`` [x, y, theta] poses in map visited
     in order; ``grasp_depth`` how far behind the marker face the grasp point lies;
     ``pre_grasp``, ``retract`` and ``place_retract`` offsets in the marker / place frame;
-    ``grasp_force`` [N]; ``min_held_width`` [m]: a closed gripper narrower than this
+    ``grasp_force`` [N]; ``back_off`` [m] the base backs away after a pick; ``min_held_width`` [m]: a closed gripper narrower than this
     holds nothing."""
 
     depot: DepotSettings
@@ -156,6 +156,7 @@ class FetchProfile:
     retract: tuple[float, float, float] = (0.0, 0.10, 0.10)
     place_retract: tuple[float, float, float] = (0.0, 0.0, 0.10)
     grasp_force: float = 20.0
+    back_off: float = 0.25
     min_held_width: float = 0.01
     nav: NavSettings = field(default_factory=NavSettings)
     arm: ArmSettings = field(default_factory=ArmSettings)

@@ -29,7 +29,7 @@ from mmexec.skills.fetch.detect import look
 from mmexec.skills.navigation import CostMap, PathTracker, TrackerConfig, find_standoff, inflate, plan_path, simplify_path
 from mmexec.skills.navigation.tracker import wrap_angle
 
-__all__ = ["approach", "costmap", "drive_path", "navigate", "rotate_by"]
+__all__ = ["approach", "back_off", "costmap", "drive_path", "navigate", "rotate_by"]
 
 log = logging.getLogger(__name__)
 
@@ -162,6 +162,35 @@ def rotate_by(ctx: SkillContext, angle: float, *, timeout: float = 20.0) -> Gene
             step = cfg.accel_w * dt
             w_cmd = max(w_cmd - step, min(w_cmd + step, w_des))
             base.set_velocity(0.0, w_cmd)
+            yield
+    except SkillCancelled:
+        yield from brake(ctx, base)
+        raise
+
+
+def back_off(ctx: SkillContext, distance: float, *, speed: float = 0.2, timeout: float = 15.0) -> Generator[None, None, Pose2D]:
+    """Drive straight backwards ``distance`` [m] on odometry (no map check: the base
+    leaves the way it came), within the acceleration limit; brake to rest at the end.
+    EXECUTION failure on a base fault or after ``timeout`` clock seconds."""
+    base = ctx.robot.base
+    assert base is not None
+    start = base.state().pose
+    t_end = ctx.clock.now() + timeout
+    try:
+        while True:
+            st = base.state()
+            if st.faults:
+                yield from brake(ctx, base)
+                raise SkillFailure(FailureKind.EXECUTION, f"base fault while backing off: {', '.join(sorted(st.faults))}")
+            if ctx.clock.now() > t_end:
+                yield from brake(ctx, base)
+                raise SkillFailure(FailureKind.EXECUTION, f"backing off {distance:g} m not done after {timeout:g} s")
+            left = distance - start.distance_to(st.pose)
+            if left <= 0.005:
+                yield from brake(ctx, base)
+                return base.state().pose
+            v = min(speed, math.sqrt(2.0 * base.max_linear_accel * 0.5 * left))
+            base.set_velocity(-max(v, 0.02), 0.0)
             yield
     except SkillCancelled:
         yield from brake(ctx, base)
