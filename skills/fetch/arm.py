@@ -22,9 +22,17 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-
 from mmexec.drivers.interfaces import GraspState
-from mmexec.skills.base import FailureKind, Output, Param, SkillCancelled, SkillContext, SkillFailure, skill, wait_goal
+from mmexec.skills.base import (
+    FailureKind,
+    Output,
+    Param,
+    SkillCancelled,
+    SkillContext,
+    SkillFailure,
+    skill,
+    wait_goal,
+)
 from mmexec.skills.fetch.common import (
     WORLD_ARM,
     WORLD_HELD,

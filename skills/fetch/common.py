@@ -27,23 +27,22 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
-
 from mmexec.config.yamlload import InputError, Mark, Problems, bind, mark_of
 from mmexec.drivers.interfaces import Base, Pose2D
 from mmexec.skills.base import FailureKind, SkillCancelled, SkillContext, SkillFailure
 
 __all__ = [
+    "WORLD_ARM",
+    "WORLD_COSTMAP",
+    "WORLD_HELD",
+    "WORLD_MARKERS",
+    "WORLD_SEARCH",
     "ArmSettings",
     "DepotSettings",
     "FetchProfile",
     "MarkerEstimate",
     "NavSettings",
     "SearchProgress",
-    "WORLD_ARM",
-    "WORLD_COSTMAP",
-    "WORLD_HELD",
-    "WORLD_MARKERS",
-    "WORLD_SEARCH",
     "arm_status",
     "base_status",
     "brake",

@@ -14,11 +14,15 @@ from collections.abc import Generator
 from typing import Any
 
 import numpy as np
-
+from mmexec.drivers.interfaces import CameraFrame
 from mmexec.skills.base import FailureKind, Output, Param, SkillContext, SkillFailure, skill
 from mmexec.skills.fetch.common import MarkerEstimate, fetch_profile, markers
-from mmexec.drivers.interfaces import CameraFrame
-from mmexec.skills.perception import DetectorConfig, MarkerDetector, MarkerPoseEstimator, observe_markers
+from mmexec.skills.perception import (
+    DetectorConfig,
+    MarkerDetector,
+    MarkerPoseEstimator,
+    observe_markers,
+)
 from mmexec.skills.perception.markers import MarkerObservation, depth_plane_normal
 
 __all__ = ["detect_marker", "detector", "look"]

@@ -16,7 +16,15 @@ from collections.abc import Generator
 from typing import Any
 
 from mmexec.drivers.interfaces import Base, Pose2D
-from mmexec.skills.base import FailureKind, Output, Param, SkillCancelled, SkillContext, SkillFailure, skill
+from mmexec.skills.base import (
+    FailureKind,
+    Output,
+    Param,
+    SkillCancelled,
+    SkillContext,
+    SkillFailure,
+    skill,
+)
 from mmexec.skills.fetch.common import (
     WORLD_COSTMAP,
     base_status,
@@ -26,7 +34,15 @@ from mmexec.skills.fetch.common import (
     named_base_pose,
 )
 from mmexec.skills.fetch.detect import look
-from mmexec.skills.navigation import CostMap, PathTracker, TrackerConfig, find_standoff, inflate, plan_path, simplify_path
+from mmexec.skills.navigation import (
+    CostMap,
+    PathTracker,
+    TrackerConfig,
+    find_standoff,
+    inflate,
+    plan_path,
+    simplify_path,
+)
 from mmexec.skills.navigation.tracker import wrap_angle
 
 __all__ = ["approach", "back_off", "costmap", "drive_path", "navigate", "rotate_by"]
