@@ -42,7 +42,7 @@ from mmexec.sim.capabilities import (
 from mmexec.sim.faults import FaultConfig, FaultInjector, blocking_obstacles
 from mmexec.sim.models import MODEL_INFO, urdf_path
 from mmexec.sim.recording import Recorder
-from mmexec.sim.scene import spawn_world
+from mmexec.sim.scene import GROUP_ARM, GROUP_BODY, GROUP_ITEM, GROUP_QUERY, GROUP_STATIC, spawn_world
 from mmexec.sim.world import World, load_world
 
 __all__ = ["CameraSection", "LidarSection", "SimError", "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
@@ -290,12 +290,20 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
                           p.getQuaternionFromEuler((0, 0, world.start.theta)), useFixedBase=True,
                           flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
         links, joints = {}, {}
+        moving = set(info.arm_joints) | set(info.gripper_joints)
+        on_arm: dict[int, bool] = {-1: False}
         for i in range(p.getNumJoints(body, physicsClientId=cid)):
             ji = p.getJointInfo(body, i, physicsClientId=cid)
             links[ji[12].decode()] = i
             joints[ji[1].decode()] = i
             if ji[2] != p.JOINT_FIXED:
                 p.setJointMotorControl2(body, i, p.VELOCITY_CONTROL, force=0.0 if ji[2] == p.JOINT_REVOLUTE and "wheel" in ji[1].decode() else 1.0, physicsClientId=cid)
+            # arm and gripper links collide with static geometry and items; links that
+            # move only with the kinematic base touch items only (bumpers are queried)
+            on_arm[i] = on_arm[ji[16]] or ji[1].decode() in moving
+            group, mask = (GROUP_ARM, GROUP_QUERY | GROUP_STATIC | GROUP_ITEM) if on_arm[i] else (GROUP_BODY, GROUP_QUERY | GROUP_ITEM)
+            p.setCollisionFilterGroupMask(body, i, group, mask, physicsClientId=cid)
+        p.setCollisionFilterGroupMask(body, -1, GROUP_BODY, GROUP_QUERY | GROUP_ITEM, physicsClientId=cid)
         for name in info.finger_links:
             p.changeDynamics(body, links[name], lateralFriction=1.0, physicsClientId=cid)
         rng = np.random.default_rng(seed)

@@ -435,6 +435,9 @@ class SimGripper(Gripper):
         if self._cons is not None:
             p.removeConstraint(self._cons, physicsClientId=self._c.cid)
             self._cons = None
+            if self._c.held_body is not None:  # free again: may fall asleep once at rest
+                p.changeDynamics(self._c.held_body, -1, activationState=p.ACTIVATION_STATE_ENABLE_SLEEPING,
+                                 physicsClientId=self._c.cid)
         self.held = None
         self._c.held_body = None
         self._grasp = state
@@ -456,6 +459,9 @@ class SimGripper(Gripper):
         T_item = _mat(pos, orn)
         rel = np.linalg.inv(T_tool) @ T_item
         mass = p.getDynamicsInfo(body, -1, physicsClientId=c.cid)[0]
+        # a held item must follow the arm: awake, and never put to sleep while held
+        p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_WAKE_UP, physicsClientId=c.cid)
+        p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c.cid)
         # offset along the fingers (tool x for both models' pad length axis)
         along = abs(rel[0, 3]) if c.info.gripper_mode == "interbotix" else abs(rel[2, 3])
         hold = self.friction * self._force
