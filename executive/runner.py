@@ -114,6 +114,7 @@ class RunOptions:
     request_timeout: float | None = None
     halt_wall_limit: float = 5.0
     argv: list[str] = field(default_factory=list)
+    recovery_enabled: bool = True
 
 
 @dataclass
@@ -337,6 +338,7 @@ class Runner:
                 backend=self.config.backend,
                 seed=opts.seed,
                 rate_hz=rate,
+                recovery_enabled=opts.recovery_enabled,
                 requests=len(self._requests),
                 argv=list(opts.argv),
                 versions=_versions(),
@@ -345,7 +347,8 @@ class Runner:
             from mmexec.executive.context import ExecContext
 
             ctx = ExecContext(robot=robot, clock=robot.clock, registry=self.registry, emit=self.log.emit,
-                              world={}, profile=dict(self.config.config.profile))
+                              world={}, profile=dict(self.config.config.profile),
+                              recovery_enabled=opts.recovery_enabled)
             n = len(self._requests)
             for i in range(n):
                 if self.interrupted:
