@@ -76,8 +76,7 @@ def look(ctx: SkillContext, marker: int, frames: int, *, record_all: bool = True
     cam = ctx.robot.camera
     if cam is None:
         raise SkillFailure(FailureKind.PRECONDITION, "marker detection needs a camera, and this robot has none")
-    det = detector(ctx)
-    det.reset()  # the view changed since the last call: search the whole image first
+    det = detector(ctx)  # without wanted ids it searches the whole image: new views are covered
     est = MarkerPoseEstimator(min_samples=1, window=max(1, frames))
     others: dict[int, Any] = {}
     closest = np.inf

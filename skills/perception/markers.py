@@ -9,16 +9,23 @@ bottom-right, bottom-left: ``(-l/2, l/2, 0), (l/2, l/2, 0), (l/2, -l/2, 0), (-l/
 Speed: OpenCV's default detector costs 7-14 ms on a 640x480 frame, mostly in the
 adaptive thresholding at three window sizes over the whole image. :class:`MarkerDetector`
 instead (1) looks in a region of interest around the markers it found last time, (2)
-otherwise detects on a 2x downscaled image with a single threshold window, and
-(3) always refines the corners at full resolution with ``cv2.cornerSubPix``, so the
-accuracy is the full-resolution one. If the fast path finds nothing it can fall back to
-the full-resolution detector (``fallback_full``).
+searches the whole image downscaled 2x with a single threshold window, and (3) always
+refines the corners at full resolution with ``cv2.cornerSubPix``, so the accuracy is the
+full-resolution one. If the wanted markers are still missing it can fall back to the
+full-resolution detector (``fallback_full``).
+
+The region-of-interest pass only replaces the whole-image pass when it already found
+everything the caller asked for (``detect(image, want={7})`` and marker 7 is in the ROI):
+a marker that came into view since the last frame (the camera turned) is never missed.
+Without ``want``, the whole image is searched at least every ``full_every`` frames
+(default: every frame).
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import cv2
@@ -47,13 +54,17 @@ class DetectorConfig:
     ``marker_length`` [m] is the side of the black square; ``downscale`` the factor of the
     fast first pass (1 = full resolution); ``roi_margin`` [fraction of the marker size]
     around the previous detection searched first; ``threshold_window`` [px, odd, at the
-    detection scale] the single adaptive-threshold window of the fast pass."""
+    detection scale] the single adaptive-threshold window of the fast pass;
+    ``full_every`` [frames]: when the caller names no wanted ids, the whole image is
+    searched at least once every this many frames (1: every frame; larger values trade
+    the latency of spotting a newly visible marker for speed)."""
 
     dictionary: str = "DICT_4X4_50"
     marker_length: float = 0.05
     downscale: int = 2
     use_roi: bool = True
     roi_margin: float = 0.6
+    full_every: int = 1
     threshold_window: int = 7
     fallback_full: bool = True
     subpix_window: int = 5
@@ -72,6 +83,8 @@ class DetectorConfig:
             errs.append(f"downscale: must be >= 1, got {self.downscale}")
         if self.threshold_window < 3 or self.threshold_window % 2 == 0:
             errs.append(f"threshold_window: must be odd and >= 3, got {self.threshold_window}")
+        if self.full_every < 1:
+            errs.append(f"full_every: must be >= 1 frame, got {self.full_every}")
         return errs
 
 
@@ -242,11 +255,14 @@ class MarkerDetector:
         full.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
         self._full = cv2.aruco.ArucoDetector(self._dict, full)
         self._last: list[tuple[int, int, int, int]] = []  # ROIs x0, y0, x1, y1 (full res)
+        self._since_full = 0  # frames since the whole image was last searched
         self.last_method = ""
 
     def reset(self) -> None:
-        """Forget the previous detections (e.g. after the camera moved a lot)."""
+        """Forget the previous detections: the next frame searches the whole image. Not
+        needed when the view changes (see :meth:`detect`); frees the ROI state."""
         self._last = []
+        self._since_full = 0
 
     def _run_fast(self, gray: np.ndarray, scale: int) -> list[MarkerDetection]:
         img = gray
@@ -275,34 +291,58 @@ class MarkerDetector:
             out.append(MarkerDetection(d.id, pts.reshape(4, 2)))
         return out
 
-    def detect(self, gray: np.ndarray) -> list[MarkerDetection]:
-        """Markers in a grey (HxW uint8) or RGB image, corners at full resolution."""
+    def detect(self, gray: np.ndarray, want: Collection[int] | None = None) -> list[MarkerDetection]:
+        """Markers in a grey (HxW uint8) or RGB image, corners at full resolution [px].
+
+        ``want``: the marker ids the caller needs. The region-of-interest pass around the
+        previous detections stands in for the whole-image pass only when it found every
+        wanted id; otherwise (and, without ``want``, at least every ``full_every`` frames)
+        the downscaled whole image is searched too and its new markers are added, so a
+        marker newly in view is found in the first frame that shows it. When wanted ids
+        (or, without ``want``, any marker) are still missing, the full-resolution detector
+        runs if ``fallback_full``. All markers found are returned, wanted or not.
+        ``last_method`` names the passes that found something (``roi``, ``downscaled``,
+        ``full``, joined by ``+``) or ``none``.
+        """
         if gray.ndim == 3:
             gray = cv2.cvtColor(gray, cv2.COLOR_RGB2GRAY)
         cfg = self.config
         H, W = gray.shape
-        dets: list[MarkerDetection] = []
-        method = ""
-        if cfg.use_roi and self._last:
+        wanted = set(want) if want is not None else None
+        full_due = wanted is None and self._since_full + 1 >= cfg.full_every
+        fast: list[MarkerDetection] = []   # corners still to refine
+        methods: list[str] = []
+        if cfg.use_roi and self._last and not full_due:
             for x0, y0, x1, y1 in self._last:
                 roi = gray[y0:y1, x0:x1]
                 scale = cfg.downscale if min(roi.shape) >= 80 * cfg.downscale else 1
                 for d in self._run_fast(roi, scale):
-                    if not any(e.id == d.id and np.allclose(e.corners, d.corners + (x0, y0), atol=2) for e in dets):
-                        dets.append(MarkerDetection(d.id, d.corners + np.array([x0, y0], np.float32)))
-            method = "roi" if dets else ""
-        if not dets:
-            dets = self._run_fast(gray, cfg.downscale)
-            method = "downscaled" if dets else ""
-        if not dets and cfg.fallback_full:
+                    _add_new(fast, MarkerDetection(d.id, d.corners + np.array([x0, y0], np.float32)))
+            if fast:
+                methods.append("roi")
+        found_ids = {d.id for d in fast}
+        if not fast or full_due or (wanted is not None and not wanted <= found_ids):
+            self._since_full = 0
+            before = len(fast)
+            for d in self._run_fast(gray, cfg.downscale):
+                _add_new(fast, d)
+            if len(fast) > before:
+                methods.append("downscaled")
+        else:
+            self._since_full += 1
+        dets = self._refine(gray, fast) if fast else []
+        found_ids = {d.id for d in dets}
+        missing = (not dets) if wanted is None else not wanted <= found_ids
+        if missing and cfg.fallback_full:
             corners, ids, _ = self._full.detectMarkers(gray)
             if ids is not None and len(ids):
-                dets = [MarkerDetection(int(i), c.reshape(4, 2).astype(np.float32)) for i, c in zip(np.asarray(ids).ravel(), corners)]
-                method = "full"
-        else:
-            dets = self._refine(gray, dets)
+                before = len(dets)
+                for i, c in zip(np.asarray(ids).ravel(), corners):
+                    _add_new(dets, MarkerDetection(int(i), c.reshape(4, 2).astype(np.float32)))
+                if len(dets) > before:
+                    methods.append("full")
         dets = [d for d in dets if _perimeter(d.corners) >= cfg.min_marker_perimeter_px]
-        self.last_method = method or "none"
+        self.last_method = "+".join(methods) or "none"
         self._last = []
         for d in dets:
             lo, hi = d.corners.min(axis=0), d.corners.max(axis=0)
@@ -312,6 +352,15 @@ class MarkerDetector:
                 min(W, int(math.ceil(hi[0] + m)) + 1), min(H, int(math.ceil(hi[1] + m)) + 1),
             ))
         return dets
+
+
+def _add_new(dets: list[MarkerDetection], d: MarkerDetection, tol: float = 4.0) -> None:
+    """Append ``d`` unless a detection of the same id lies within ``tol`` px (corner mean)."""
+    c = d.corners.mean(axis=0)
+    for e in dets:
+        if e.id == d.id and float(np.linalg.norm(e.corners.mean(axis=0) - c)) <= tol:
+            return
+    dets.append(d)
 
 
 def _perimeter(c: np.ndarray) -> float:
@@ -327,10 +376,11 @@ def observe_markers(
 ) -> list[MarkerObservation]:
     """Detect markers in ``frame`` (optionally only ``ids``), estimate each pose, refine it
     with the frame's depth image when there is one, and express it in ``map`` through
-    ``T_map_base @ T_base_camera``. ``marker_length`` [m] overrides the detector's."""
+    ``T_map_base @ T_base_camera``. ``marker_length`` [m] overrides the detector's.
+    ``ids`` are also the detector's wanted ids (see :meth:`MarkerDetector.detect`)."""
     cfg = detector.config
     length = marker_length if marker_length is not None else cfg.marker_length
-    dets = detector.detect(frame.rgb)
+    dets = detector.detect(frame.rgb, want=ids)
     out: list[MarkerObservation] = []
     T_map_cam = np.asarray(frame.T_map_base) @ np.asarray(frame.T_base_camera)
     for d in dets:

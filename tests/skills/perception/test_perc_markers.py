@@ -13,7 +13,7 @@ from mmexec.skills.perception.markers import (
     observe_markers,
     refine_pose_with_depth,
 )
-from mmexec.skills.perception.synthetic import look_at_marker, render_marker_view
+from mmexec.skills.perception.synthetic import look_at_marker, render_marker_view, render_markers_view
 
 K = CameraIntrinsics(640, 480, 615.0, 615.0, 319.5, 239.5)
 L = 0.10
@@ -48,12 +48,15 @@ def test_roi_tracking_and_downscale_paths_agree():
     det = MarkerDetector(DetectorConfig(marker_length=L))
     first = det.detect(view.rgb)
     assert det.last_method == "downscaled"
-    second = det.detect(view.rgb)
+    second = det.detect(view.rgb, want={3})
     assert det.last_method == "roi"
     assert np.allclose(first[0].corners, second[0].corners, atol=0.05)
+    # without wanted ids the whole image is searched every frame by default
+    third = det.detect(view.rgb)
+    assert det.last_method == "downscaled" and np.allclose(third[0].corners, first[0].corners, atol=0.05)
     # marker gone: the ROI misses, and so does every fallback
     blank = np.full_like(view.rgb, 128)
-    assert det.detect(blank) == [] and det.last_method == "none"
+    assert det.detect(blank, want={3}) == [] and det.last_method == "none"
 
 
 def test_small_far_marker_uses_full_resolution_fallback():
@@ -109,3 +112,69 @@ def test_bad_config_rejected():
         MarkerDetector(DetectorConfig(dictionary="DICT_4X4_51"))
     with pytest.raises(ValueError, match="threshold_window"):
         MarkerDetector(DetectorConfig(threshold_window=8))
+
+
+# --------------------------------------------------------------------------- view changes
+
+
+def _two_marker_views():
+    """Frame 1: marker 3 alone; frame 2 (the camera turned a little): marker 3 still in
+    view near where it was, and marker 8 newly in view on the other side."""
+    T3 = look_at_marker(1.0, yaw=0.2, offset=(-0.20, 0.0))
+    T8 = look_at_marker(1.1, yaw=-0.2, offset=(0.25, 0.02))
+    only3 = render_markers_view(K, [(T3, 3)], L, noise_sigma=2.0)
+    T3b = T3.copy()
+    T3b[0, 3] += 0.01  # moved by about 6 px
+    both = render_markers_view(K, [(T3b, 3), (T8, 8)], L, noise_sigma=2.0)
+    return only3, both
+
+
+def test_marker_newly_in_view_is_found_although_the_roi_hits():
+    """Regression: an ROI hit used to skip the whole-image pass, so a marker that came
+    into view after the camera moved was missed until the tracked one was lost."""
+    only3, both = _two_marker_views()
+    det = MarkerDetector(DetectorConfig(marker_length=L))
+    assert [d.id for d in det.detect(only3.rgb)] == [3]
+    # all markers wanted (no ids): the new one is found in the first frame showing it
+    assert sorted(d.id for d in det.detect(both.rgb)) == [3, 8]
+    # the wanted id is not in the ROI: the whole image is searched as well
+    det2 = MarkerDetector(DetectorConfig(marker_length=L))
+    det2.detect(only3.rgb)
+    assert 8 in {d.id for d in det2.detect(both.rgb, want={8})}
+    assert "downscaled" in det2.last_method
+    # the wanted id is in the ROI: the cheap pass is enough (and the new one is not looked for)
+    det3 = MarkerDetector(DetectorConfig(marker_length=L))
+    det3.detect(only3.rgb)
+    assert [d.id for d in det3.detect(both.rgb, want={3})] == [3] and det3.last_method == "roi"
+
+
+def test_full_every_bounds_the_latency_of_a_new_marker():
+    only3, both = _two_marker_views()
+    det = MarkerDetector(DetectorConfig(marker_length=L, full_every=3))
+    det.detect(only3.rgb)                       # whole image (nothing tracked yet)
+    seen = [sorted(d.id for d in det.detect(both.rgb)) for _ in range(3)]
+    assert seen == [[3], [3], [3, 8]]           # ROI, ROI, then the due whole-image pass
+    with pytest.raises(ValueError, match="full_every"):
+        MarkerDetector(DetectorConfig(full_every=0))
+
+
+def test_observe_markers_passes_ids_as_wanted():
+    only3, both = _two_marker_views()
+    det = MarkerDetector(DetectorConfig(marker_length=L))
+    frame1 = CameraFrame(only3.rgb, only3.depth, K, 0.0, np.eye(4))
+    frame2 = CameraFrame(both.rgb, both.depth, K, 0.1, np.eye(4))
+    assert [o.id for o in observe_markers(frame1, det, ids={3})] == [3]
+    assert [o.id for o in observe_markers(frame2, det, ids={8})] == [8]
+
+
+def test_render_markers_view_depth_follows_each_marker_plane():
+    T3 = look_at_marker(1.0, offset=(-0.2, 0.0))
+    T8 = look_at_marker(1.5, offset=(0.25, 0.0))
+    v = render_markers_view(K, [(T3, 3), (T8, 8)], L)
+    u8 = int(round(K.fx * 0.25 / 1.5 + K.cx))
+    u3 = int(round(K.fx * -0.2 / 1.0 + K.cx))
+    assert v.depth[240, u3] == pytest.approx(1.0, abs=1e-3)
+    assert v.depth[240, u8] == pytest.approx(1.5, abs=1e-3)
+    # a marker facing away is not drawn
+    away = look_at_marker(1.0, yaw=math.pi)
+    assert np.isnan(render_markers_view(K, [(away, 5)], L).corners).all()
