@@ -39,6 +39,7 @@ from mmexec.sim.capabilities import (
     SimGripper,
     SimLidar,
 )
+from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultConfig, FaultInjector, blocking_obstacles
 from mmexec.sim.models import MODEL_INFO, urdf_path
 from mmexec.sim.recording import Recorder
@@ -222,7 +223,42 @@ class SimRobot(Robot):
             self.camera.set_pan_tilt(cfg.camera.pan, cfg.camera.tilt)
         self.lidar = SimLidar(core, cfg.lidar.beams, cfg.lidar.range_min, cfg.lidar.range_max, cfg.lidar.noise)
         self.truth = SimTruth(self)  #: SIM-ONLY ground truth (tests, campaign scoring)
+        core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
+        self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}
+        self.physics_steps = 0  #: substeps that ran stepSimulation (the others were at rest)
         self._closed = False
+
+    def _at_rest(self, period: float) -> bool:
+        """Whether ``period`` [s] of physics can be skipped without changing anything a
+        step would change: arm and gripper at rest with nothing held, every item still
+        (Bullet zeroes the velocities of sleeping bodies), and the robot either not moving
+        or, while it drives, farther from every item than its own radius plus the distance
+        it can cover in ``period`` (5 cm margin). The kinematic base and the clock advance
+        either way. The decision depends only on the simulation state, so a seed still
+        reproduces a run."""
+        if not (self.arm.at_rest() and self.gripper.at_rest()):
+            return False
+        cid = self.cid
+        items = self.scene_handles.items
+        for body in items.values():
+            v, w = p.getBaseVelocity(body, physicsClientId=cid)
+            if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > 1e-6 or w[0] * w[0] + w[1] * w[1] + w[2] * w[2] > 1e-4:
+                return False
+        if self.base.still():
+            return True
+        core = self.core
+        core.sync()
+        bx, by = core.true_pose.x, core.true_pose.y
+        reach = 0.0
+        for li in range(-1, p.getNumJoints(core.body, physicsClientId=cid)):
+            lo, hi = p.getAABB(core.body, li, physicsClientId=cid)
+            reach = max(reach, math.hypot(max(abs(lo[0] - bx), abs(hi[0] - bx)), max(abs(lo[1] - by), abs(hi[1] - by))))
+        reach += self.base.max_linear * period + 0.05
+        for name, body in items.items():
+            pos = p.getBasePositionAndOrientation(body, physicsClientId=cid)[0]
+            if math.hypot(pos[0] - bx, pos[1] - by) < reach + self._item_radius[name]:
+                return False
+        return True
 
     def spin(self, period: float) -> None:
         """Step physics by exactly ``period`` [s] of sim time: period * physics_hz whole substeps."""
@@ -233,14 +269,20 @@ class SimRobot(Robot):
         if n < 1 or abs(n - period * hz) > 1e-6 * max(1.0, period * hz):
             raise ValueError(f"period {period} s is not a whole number of {hz} Hz physics substeps")
         dt = 1.0 / hz
+        rest = self._at_rest(period)
+        core = self.core
         for _ in range(n):
             self.base.update(dt)
-            self.arm.update(dt)
-            self.gripper.update(dt)
-            p.stepSimulation(physicsClientId=self.cid)
+            if not rest:
+                self.arm.update(dt)
+                self.gripper.update(dt)
+                core.sync()
+                p.stepSimulation(physicsClientId=self.cid)
+                self.physics_steps += 1
             self.clock.steps += 1
             if self.recorder is not None:
-                tp = self.core.true_pose
+                core.sync()
+                tp = core.true_pose
                 self.recorder.sample(self.clock.now(), (tp.x, tp.y), tp.theta)
 
     def close(self) -> None:

@@ -43,6 +43,7 @@ from mmexec.drivers.interfaces import (
     Lidar,
     Pose2D,
 )
+from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultInjector
 from mmexec.sim.models import ModelInfo
 from mmexec.sim.scene import SceneHandles
@@ -89,9 +90,22 @@ class SimCore:
     joints: dict[str, int] = field(default_factory=dict)
     true_pose: Pose2D = Pose2D()
     held_body: int | None = None
+    clearance: ClearanceMap | None = None  #: static-geometry clearance for the base (set by the backend)
+    _placed: Pose2D | None = field(default=None, repr=False)
+
+    def sync(self) -> None:
+        """Put the pybullet body at ``true_pose`` if the base moved since it was last
+        placed. The base integrates its pose every substep but places the body lazily:
+        before a physics step, an exact collision test, a render or a link query."""
+        if self._placed != self.true_pose:
+            pose = self.true_pose
+            q = p.getQuaternionFromEuler((0.0, 0.0, pose.theta))
+            p.resetBasePositionAndOrientation(self.body, (pose.x, pose.y, 0.0), q, physicsClientId=self.cid)
+            self._placed = pose
 
     def link_T(self, name: str) -> np.ndarray:
         """``T_world_link`` of a model link (world = ``map``)."""
+        self.sync()
         s = p.getLinkState(self.body, self.links[name], computeForwardKinematics=True, physicsClientId=self.cid)
         return _mat(s[4], s[5])
 
@@ -104,9 +118,9 @@ class SimCore:
         return np.linalg.inv(self.base_T()) @ self.link_T(name)
 
     def place_base(self, pose: Pose2D) -> None:
+        """Sim-only: teleport the base (true pose in ``map``) and place the body now."""
         self.true_pose = pose
-        q = p.getQuaternionFromEuler((0.0, 0.0, pose.theta))
-        p.resetBasePositionAndOrientation(self.body, (pose.x, pose.y, 0.0), q, physicsClientId=self.cid)
+        self.sync()
 
 
 # --------------------------------------------------------------------------- base
@@ -141,6 +155,24 @@ class SimBase(Base):
         self._faults: frozenset[str] = frozenset()
         self._bump_links = tuple(core.links[n] for n in bump_links)
         self.bumps = 0  #: number of substeps refused for collision (for tests and scoring)
+        self.exact_checks = 0  #: substeps that needed the exact getClosestPoints test (benchmarks)
+        # disk around the base origin holding the bumper bodies at any yaw, and their heights
+        core.sync()
+        o = np.array([core.true_pose.x, core.true_pose.y])
+        r, zlo, zhi = 0.0, math.inf, -math.inf
+        for li in self._bump_links:
+            lo, hi = p.getAABB(core.body, li, physicsClientId=core.cid)
+            for cx in (lo[0], hi[0]):
+                for cy in (lo[1], hi[1]):
+                    r = max(r, float(np.hypot(cx - o[0], cy - o[1])))
+            zlo, zhi = min(zlo, lo[2]), max(zhi, hi[2])
+        self.bump_radius = r  #: [m] horizontal radius holding the bumper bodies
+        self.bump_heights = (zlo, zhi)  #: [m] height range of the bumper bodies
+
+    def still(self) -> bool:
+        """True when the base is at rest and no live command will move it."""
+        live = self._c.clock.now() - self._cmd_time <= self.command_timeout and self._cmd != (0.0, 0.0)
+        return self._v == 0.0 and self._w == 0.0 and not live
 
     def state(self) -> BaseState:
         return BaseState(pose=self._est, v=self._v, w=self._w, stamp=self._c.clock.now(), faults=self._faults)
@@ -179,8 +211,12 @@ class SimBase(Base):
         old = c.true_pose
         th = old.theta + self._w * dt / 2
         new = Pose2D(old.x + self._v * dt * math.cos(th), old.y + self._v * dt * math.sin(th), _wrap(old.theta + self._w * dt))
-        c.place_base(new)
-        hit, ang = self._collides()
+        c.true_pose = new  # the body follows lazily (SimCore.sync)
+        hit, ang = False, 0.0
+        if c.clearance is None or not c.clearance.clear(new.x, new.y, self.bump_radius):
+            self.exact_checks += 1
+            c.sync()
+            hit, ang = self._collides()
         if hit:
             c.place_base(old)
             side = "bumper_left" if ang > 0.35 else "bumper_right" if ang < -0.35 else "bumper_centre"
@@ -299,6 +335,15 @@ class SimArm(Arm):
         elif self._stop is None:
             self._hold = self._q()[0]
 
+    def at_rest(self) -> bool:
+        """True when no goal or stop ramp is active, the hold target is commanded and
+        every joint moves slower than 1e-3 rad/s (physics may pause, see SimRobot.spin)."""
+        if (self._goal is not None and not self._goal.done()) or self._stop is not None or self._traj is not None:
+            return False
+        if self._hold is None or self._held_cmd is not self._hold:
+            return False
+        return bool(np.all(np.abs(self._q()[1]) < 1e-3))
+
     def _sample(self, t: float) -> np.ndarray:
         traj = self._traj
         assert traj is not None
@@ -392,6 +437,10 @@ class SimGripper(Gripper):
         self._held_since = 0.0
         self._slip_after: float | None = None
         self._hold_T: np.ndarray | None = None
+
+    def at_rest(self) -> bool:
+        """True when nothing is held and no move is in progress (the pad targets persist)."""
+        return self.held is None and (self._goal is None or self._goal.done()) and self._cmd == self._target
 
     def _width(self) -> float:
         st = p.getJointStates(self._c.body, self._idx, physicsClientId=self._c.cid)
