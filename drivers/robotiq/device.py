@@ -29,7 +29,13 @@ from mmexec.drivers.robotiq.errors import (
     RobotiqLinkLost,
     RobotiqTimeout,
 )
-from mmexec.drivers.transport import LinkClosed, LinkError, LinkTimeout, SerialSettings, SerialTransport
+from mmexec.drivers.transport import (
+    LinkClosed,
+    LinkError,
+    LinkTimeout,
+    SerialSettings,
+    SerialTransport,
+)
 
 __all__ = ["ModbusSettings", "RobotiqModbus"]
 

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
 from mmexec.drivers.interfaces import (
     Arm,
     CapabilityError,

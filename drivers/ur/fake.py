@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
 from mmexec.drivers.interfaces import Clock
 from mmexec.drivers.ur import model as urmodel
 

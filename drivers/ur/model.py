@@ -12,6 +12,7 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+
 from mmexec.drivers.interfaces import JointLimit
 
 __all__ = [

@@ -7,7 +7,13 @@ import time
 import pytest
 
 from mmexec.drivers.fakes.pty import PtyDevice
-from mmexec.drivers.transport import LinkClosed, LinkTimeout, PortNotFound, SerialSettings, SerialTransport
+from mmexec.drivers.transport import (
+    LinkClosed,
+    LinkTimeout,
+    PortNotFound,
+    SerialSettings,
+    SerialTransport,
+)
 
 
 class Echo(PtyDevice):

@@ -14,7 +14,12 @@ import numpy as np
 import pytest
 
 from mmexec.config.yamlload import InputError
-from mmexec.drivers.camera.config import CameraConfig, IntrinsicsConfig, MountConfig, load_camera_config
+from mmexec.drivers.camera.config import (
+    CameraConfig,
+    IntrinsicsConfig,
+    MountConfig,
+    load_camera_config,
+)
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.camera.uvc import UVCCamera
 from mmexec.drivers.interfaces import ManualClock

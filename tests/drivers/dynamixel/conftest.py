@@ -7,6 +7,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+
 from mmexec.drivers.dynamixel.bus import BusConfig, DxlBus
 from mmexec.drivers.fakes.dynamixel import FakeDxlBus, wx250s_servos
 

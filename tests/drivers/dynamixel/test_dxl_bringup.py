@@ -9,6 +9,7 @@ import subprocess
 import sys
 
 import pytest
+
 from mmexec.drivers.dynamixel import bringup
 from mmexec.drivers.fakes.dynamixel import FakeDxlBus
 

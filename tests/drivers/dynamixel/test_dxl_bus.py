@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 
 import pytest
+
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.codec import BadFrame, Packet, StatusResult
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+
 from mmexec.drivers.dynamixel import control_table as ct
 
 

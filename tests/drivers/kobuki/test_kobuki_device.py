@@ -23,7 +23,6 @@ from mmexec.drivers.kobuki.device import (
 )
 from mmexec.drivers.transport import SerialSettings, SerialTransport
 
-
 Waiter = Callable[..., bool]
 FAST = dict(linear_accel=5.0, angular_accel=20.0)
 

@@ -9,7 +9,6 @@ from collections.abc import Iterator
 import pytest
 
 
-
 @pytest.fixture(autouse=True)
 def no_leaked_threads() -> Iterator[None]:
     """Every test must leave the thread count where it found it."""

@@ -6,6 +6,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from robotiq_helpers import finish, wait_for
 
 from mmexec.drivers.fakes.robotiq import FakeRobotiq
 from mmexec.drivers.interfaces import CapabilityError, GoalState, GraspState
@@ -19,7 +20,6 @@ from mmexec.drivers.robotiq.errors import (
     RobotiqTimeout,
 )
 from mmexec.drivers.robotiq.gripper import RobotiqGripper
-from robotiq_helpers import finish, wait_for
 
 ONE_UNIT = codec.STROKE / 255  # m per position unit
 

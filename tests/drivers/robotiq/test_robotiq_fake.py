@@ -6,13 +6,12 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from robotiq_helpers import wait_for
 
 from mmexec.drivers.fakes.robotiq import FakeRobotiq
 from mmexec.drivers.robotiq import codec
 from mmexec.drivers.robotiq.codec import Command, Status
 from mmexec.drivers.transport import LinkTimeout, SerialSettings, SerialTransport
-
-from robotiq_helpers import wait_for
 
 
 @pytest.fixture

@@ -7,6 +7,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from robotiq_helpers import finish, wait_for
 
 from mmexec.drivers.fakes.robotiq import FakeURCap
 from mmexec.drivers.interfaces import GoalState, GraspState
@@ -16,7 +17,6 @@ from mmexec.drivers.robotiq.core import LinkState
 from mmexec.drivers.robotiq.errors import RobotiqNotReady, RobotiqTimeout
 from mmexec.drivers.robotiq.gripper import RobotiqGripper
 from mmexec.drivers.robotiq.urcap import RobotiqURCap, URCapSettings, encode_set, parse_get_reply
-from robotiq_helpers import finish, wait_for
 
 
 @pytest.fixture

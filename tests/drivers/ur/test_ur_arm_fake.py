@@ -10,11 +10,12 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from urtest_helpers import step_until, sync, wait_for
+
 from mmexec.drivers.interfaces import GoalState, JointTrajectory, ManualClock
 from mmexec.drivers.ur import model as urmodel
 from mmexec.drivers.ur.arm import URArm, URArmConfig, URConnectionError
 from mmexec.drivers.ur.fake import FakeURController
-from urtest_helpers import step_until, sync, wait_for
 
 HOME = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0)
 
