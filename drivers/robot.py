@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
 from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, did_you_mean
 from mmexec.drivers.interfaces import (
     CapabilityError,

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
 from mmexec.config.yamlload import (
     InputError,
     Mark,
@@ -101,8 +102,8 @@ class CameraConfig:
             if not (i.fx > 0 and i.fy > 0):
                 out.append(("intrinsics", f"fx and fy must be > 0 px, got {i.fx}, {i.fy}"))
             if len(i.dist) not in (4, 5, 8, 12, 14):
-                out.append(("intrinsics", f"dist needs 4, 5, 8, 12 or 14 coefficients, "
-                                          f"got {len(i.dist)}"))
+                out.append(("intrinsics",
+                            f"dist needs 4, 5, 8, 12 or 14 coefficients, got {len(i.dist)}"))
         return out
 
     def camera_intrinsics(self) -> CameraIntrinsics | None:

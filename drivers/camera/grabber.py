@@ -16,8 +16,10 @@ import logging
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Self
 
 import numpy as np
+
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.interfaces import (
     Camera,
@@ -106,7 +108,7 @@ class GrabbingCamera(Camera):
                 log.warning("%s: grabber thread still blocked in a read after 2 s", self.name)
         self._close_device()
 
-    def __enter__(self) -> GrabbingCamera:
+    def __enter__(self) -> Self:
         self.open()
         return self
 

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+
 from mmexec.drivers.camera.config import CameraConfig
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.camera.grabber import GrabbingCamera

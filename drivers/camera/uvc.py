@@ -15,6 +15,7 @@ from typing import Any, Protocol
 
 import cv2
 import numpy as np
+
 from mmexec.drivers.camera.config import CameraConfig
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.camera.grabber import GrabbingCamera

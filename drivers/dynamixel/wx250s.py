@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from typing import Self
 
 import numpy as np
+
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,
@@ -55,8 +56,6 @@ from mmexec.drivers.dynamixel.bus import (
 from mmexec.drivers.dynamixel.codec import Status, StatusResult
 from mmexec.drivers.dynamixel.control_table import (
     MODELS,
-    XL430_W250,
-    XM430_W350,
     Model,
     OperatingMode,
     current_to_amps,
@@ -65,6 +64,18 @@ from mmexec.drivers.dynamixel.control_table import (
     pulses_to_rad,
     rad_to_pulses,
     velocity_to_rad_s,
+)
+from mmexec.drivers.dynamixel.model import (
+    ARM_JOINTS,
+    FINGER_MAX,
+    FINGER_MIN,
+    GRIPPER,
+    LOCOBOT_MOUNT,
+    PAN_TILT,
+    JointSpec,
+    finger_offset,
+    gripper_angle_for_width,
+    gripper_width,
 )
 from mmexec.drivers.interfaces import (
     Arm,
@@ -105,85 +116,6 @@ GOAL_POSITION = 116
 GOAL_PWM = 100
 TORQUE_ENABLE = 64
 HW_ERROR = 70
-
-# --------------------------------------------------------------------------- arm description
-
-
-@dataclass(frozen=True)
-class JointSpec:
-    """One joint: servo ``id``, model, optional ``shadow`` id, drive direction, register
-    limits [pulses], URDF limits [rad], velocity [rad/s] and effort [N m]."""
-
-    name: str
-    id: int
-    model: Model
-    min_pulses: int
-    max_pulses: int
-    lower: float
-    upper: float
-    velocity: float = math.pi
-    effort: float = math.inf
-    reversed: bool = False
-    shadow: int | None = None
-
-    def limit(self) -> JointLimit:
-        return JointLimit(self.name, self.lower, self.upper, self.velocity, effort=self.effort)
-
-
-_PI = math.pi - 1e-5
-ARM_JOINTS: tuple[JointSpec, ...] = (
-    JointSpec("waist", 1, XM430_W350, 0, 4095, -_PI, _PI, effort=10.0),
-    JointSpec("shoulder", 2, XM430_W350, 819, 3345, -1.88496, 1.98968, effort=20.0, shadow=3),
-    JointSpec("elbow", 4, XM430_W350, 648, 3094, -2.14675, 1.60570, effort=15.0, shadow=5),
-    JointSpec("forearm_roll", 6, XM430_W350, 0, 4095, -_PI, _PI, effort=2.0),
-    JointSpec(
-        "wrist_angle", 7, XM430_W350, 910, 3447, -1.74533, 2.14675, effort=5.0, reversed=True
-    ),
-    JointSpec("wrist_rotate", 8, XL430_W250, 0, 4095, -_PI, _PI, effort=1.0),
-)
-GRIPPER = JointSpec("gripper", 9, XL430_W250, 0, 4095, -math.pi, math.pi, effort=1.0)
-PAN_TILT: tuple[JointSpec, ...] = (
-    JointSpec("pan", 10, XL430_W250, 1024, 3072, -math.pi / 2, math.pi / 2, effort=2.0),
-    JointSpec("tilt", 11, XL430_W250, 1024, 3072, -math.pi / 2, 1.309, effort=2.0, reversed=True),
-)
-#: ``T_base_armbase`` of the LoCoBot: arm_base_link in base_link (robots.md 1.2)
-LOCOBOT_MOUNT = (0.097277, 0.0, 0.10795)
-
-# --------------------------------------------------------------------------- gripper geometry
-
-HORN_RADIUS = 0.014  # m
-ARM_LENGTH = 0.024  # m
-FINGER_MIN = 0.015  # m, one finger's travel from the centre
-FINGER_MAX = 0.037  # m
-
-
-def finger_offset(angle: float) -> float:
-    """One finger's distance from the gripper centre [m] for servo ``angle`` [rad]."""
-    rs = HORN_RADIUS * math.sin(angle)
-    return rs + math.sqrt(ARM_LENGTH**2 - (HORN_RADIUS**2 - rs**2))
-
-
-def gripper_width(angle: float) -> float:
-    """Gap between the two finger pads [m] (fingers mirrored) for servo ``angle`` [rad]."""
-    return 2.0 * finger_offset(angle)
-
-
-def gripper_angle_for_width(width: float) -> float:
-    """Servo angle [rad] giving ``width`` [m] (inverse of :func:`gripper_width` on
-    [-pi/2, pi/2], where it is monotonic); raises ValueError outside its range."""
-    lo, hi = -math.pi / 2, math.pi / 2
-    if not gripper_width(lo) <= width <= gripper_width(hi):
-        raise ValueError(
-            f"gripper width {width:.4f} m outside {gripper_width(lo):.4f}..{gripper_width(hi):.4f}"
-        )
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        if gripper_width(mid) < width:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
-
 
 # --------------------------------------------------------------------------- one control cycle
 

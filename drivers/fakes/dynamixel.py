@@ -46,15 +46,13 @@ from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.codec import BROADCAST_ID, BadFrame, Instruction, Packet, StatusResult
 from mmexec.drivers.dynamixel.control_table import (
     MODELS,
-    XL430_W250,
-    XM430_W350,
     Area,
     Model,
     OperatingMode,
     encode_hardware_error,
     rad_to_pulses,
 )
-from mmexec.drivers.dynamixel.wx250s import gripper_angle_for_width
+from mmexec.drivers.dynamixel.model import ARM_JOINTS, GRIPPER, PAN_TILT, gripper_angle_for_width
 from mmexec.drivers.fakes.pty import PtyDevice
 
 __all__ = ["FakeDxlBus", "FakeServo", "wx250s_servos"]
@@ -319,22 +317,16 @@ def wx250s_servos(*, locobot: bool = False, configured: bool = False) -> list[Fa
         rad_to_pulses(gripper_angle_for_width(0.030)),
         rad_to_pulses(gripper_angle_for_width(0.074)),
     )
-    spec = [
-        (1, XM430_W350, waist, 0, 255, (0, 4095)),
-        (2, XM430_W350, shoulder, 0, 255, (819, 3345)),
-        (3, XM430_W350, shoulder, 1, 2, (819, 3345)),
-        (4, XM430_W350, elbow, 0, 255, (648, 3094)),
-        (5, XM430_W350, elbow, 1, 4, (648, 3094)),
-        (6, XM430_W350, roll, 0, 255, (0, 4095)),
-        (7, XM430_W350, wangle, 1, 255, (910, 3447)),
-        (8, XL430_W250, wrot, 0, 255, (0, 4095)),
-        (9, XL430_W250, 2048, 0, 255, (0, 4095)),
-    ]
-    if locobot:
-        spec += [
-            (10, XL430_W250, 2048, 0, 255, (1024, 3072)),
-            (11, XL430_W250, 2048, 1, 255, (1024, 3072)),
-        ]
+    # ids, models, drive directions, shadows and register limits from the one WX250s model
+    start = dict(zip((j.name for j in ARM_JOINTS), (waist, shoulder, elbow, roll, wangle, wrot)))
+    spec: list[tuple[int, Model, int, int, int, tuple[int, int]]] = []
+    for j in ARM_JOINTS + (GRIPPER,) + (PAN_TILT if locobot else ()):
+        limits = (j.min_pulses, j.max_pulses)
+        pos = start.get(j.name, 2048)
+        spec.append((j.id, j.model, pos, int(j.reversed), 255, limits))
+        if j.shadow is not None:  # the shadow turns the other way, driven by its primary
+            spec.append((j.shadow, j.model, pos, 1, j.id, limits))
+    spec.sort()
     servos = []
     for dxl_id, model, pos, drive, secondary, (lo, hi) in spec:
         s = FakeServo(

@@ -66,10 +66,10 @@ class FakeKobukiState:
     charger: int = 0
     battery: float = 16.5           # V
     overcurrent: int = 0
-    firmware: k.Version = k.Version(1, 2, 0)
-    hardware: k.Version = k.Version(1, 0, 4)
+    firmware: k.Version = field(default_factory=lambda: k.Version(1, 2, 0))
+    hardware: k.Version = field(default_factory=lambda: k.Version(1, 0, 4))
     unique_id: tuple[int, int, int] = (0x0A0B0C0D, 0x11223344, 0x55667788)
-    gains: k.ControllerInfo = k.ControllerInfo(False, 100.0, 0.1, 2.0)
+    gains: k.ControllerInfo = field(default_factory=lambda: k.ControllerInfo(False, 100.0, 0.1, 2.0))
     gp_output: int = 0x00F0
     sounds: list[tuple[int, int]] = field(default_factory=list)
     sound_sequences: list[int] = field(default_factory=list)

@@ -650,7 +650,8 @@ def velocity_to_speed_radius(v: float, w: float) -> tuple[int, int]:
     """(v [m/s], w [rad/s]) to the firmware's (speed [mm/s], radius [mm]), vendor rules:
 
     1. ``|w| < 1e-4``: straight, radius 0, speed = 1000 v;
-    2. radius = 1000 v / w; if ``|v| < 1e-4`` or ``|radius| <= 1``: pure rotation,
+    2. radius = 1000 v / w; if ``|v| < 1e-4`` or ``|radius| <= 1`` after rounding to
+       whole mm (a radius of 1.3 mm sent as 1 would be the marker): pure rotation,
        radius = 1 (a marker), speed = 1000 * 0.230 * w / 2 (positive = CCW);
     3. else speed = (radius + 115) w for radius > 0, (radius - 115) w otherwise
        (the outer wheel's speed; positive radius turns left).
@@ -661,7 +662,7 @@ def velocity_to_speed_radius(v: float, w: float) -> tuple[int, int]:
     if abs(w) < eps:
         return _clamp16(1000.0 * v), 0
     radius = 1000.0 * v / w
-    if abs(v) < eps or abs(radius) <= 1.0:
+    if abs(v) < eps or abs(round(radius)) <= 1:
         return _clamp16(1000.0 * BIAS * w / 2.0), 1
     half = 1000.0 * BIAS / 2.0
     speed = (radius + half) * w if radius > 0 else (radius - half) * w

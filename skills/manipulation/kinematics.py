@@ -19,12 +19,16 @@ joint limits; it returns None when no seed converges.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from mmexec.drivers.dynamixel import model as wx250s_model
 from mmexec.drivers.interfaces import JointLimit
+from mmexec.drivers.ur import model as urmodel
 
 __all__ = [
     "ArmKinematics",
@@ -300,27 +304,14 @@ def wx250s(*, locobot: bool = True, acceleration: float = 5.0) -> ArmKinematics:
     ], dtype=float).T
     M = np.eye(4)
     M[:3, 3] = (0.458325, 0.0, h2)
-    v = math.pi
-    limits = (
-        JointLimit("waist", -_PI_LIM, _PI_LIM, v, acceleration, 10.0),
-        JointLimit("shoulder", -1.88496, 1.98968, v, acceleration, 20.0),
-        JointLimit("elbow", -2.14675, 1.60570, v, acceleration, 15.0),
-        JointLimit("forearm_roll", -_PI_LIM, _PI_LIM, v, acceleration, 2.0),
-        JointLimit("wrist_angle", -1.74533, 2.14675, v, acceleration, 5.0),
-        JointLimit("wrist_rotate", -_PI_LIM, _PI_LIM, v, acceleration, 1.0),
-    )
+    # joint ranges, speeds and efforts: the driver's model (one source of truth)
+    limits = tuple(dataclasses.replace(j.limit(), acceleration=acceleration) for j in wx250s_model.ARM_JOINTS)
     return ArmKinematics("wx250s" + ("_locobot" if locobot else ""), tuple(lim.name for lim in limits),
                          screws, M, limits, approach_axis=0)
 
 
-UR5E_DH: tuple[tuple[float, float, float], ...] = (
-    (0.1625, 0.0, math.pi / 2),
-    (0.0, -0.425, 0.0),
-    (0.0, -0.3922, 0.0),
-    (0.1333, 0.0, math.pi / 2),
-    (0.0997, 0.0, -math.pi / 2),
-    (0.0996, 0.0, 0.0),
-)
+#: UR5e standard DH rows ``(d, a, alpha)`` [m, m, rad]: the driver's table (robots.md 2.1).
+UR5E_DH: tuple[tuple[float, float, float], ...] = urmodel.DH["ur5e"]
 
 
 def ur5e(*, tcp_offset: float = 0.155, acceleration: float = 3.0) -> ArmKinematics:
@@ -328,19 +319,12 @@ def ur5e(*, tcp_offset: float = 0.155, acceleration: float = 3.0) -> ArmKinemati
     (0 gives ``tool0`` itself). Joint limits from the ROS description (elbow +-pi, others
     +-2pi), 180 deg/s; ``acceleration`` [rad/s^2] is not published by UR (a default)."""
     S, M = dh_to_poe(UR5E_DH)
-    Rz = np.diag([-1.0, -1.0, 1.0])  # base_link = controller base rotated by pi about z
+    T_bl_base = urmodel.T_BASELINK_BASE  # base_link = controller base rotated by pi about z
+    Rz = T_bl_base[:3, :3]
     S = np.vstack([Rz @ S[:3], Rz @ S[3:]])
-    T_bl_base = np.eye(4)
-    T_bl_base[:3, :3] = Rz
     M = T_bl_base @ M
     tcp = np.eye(4)
     tcp[2, 3] = tcp_offset
-    v = math.pi
-    two_pi = 2 * math.pi
-    names = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")
-    efforts = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
-    limits = tuple(
-        JointLimit(n, -(math.pi if n == "elbow_joint" else two_pi), math.pi if n == "elbow_joint" else two_pi, v, acceleration, e)
-        for n, e in zip(names, efforts)
-    )
+    names = urmodel.JOINT_NAMES
+    limits = urmodel.joint_limits("ur5e", acceleration)
     return ArmKinematics("ur5e", names, S, M @ tcp, limits, approach_axis=2)

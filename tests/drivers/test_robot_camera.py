@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+
 from mmexec.config.yamlload import InputError
 from mmexec.drivers import robot as rb
 from mmexec.drivers.camera.config import CameraConfig, MountConfig

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 from mmexec.drivers.kobuki import codec as k
@@ -183,6 +183,8 @@ def test_velocity_to_speed_radius_rules(v: float, w: float, expected: tuple[int,
 
 
 @given(st.floats(-0.7, 0.7), st.floats(-3.0, 3.0))
+@example(v=0.001953125, w=1.875)  # radius 1.04 mm: rounded to the pure-rotation marker 1
+@example(v=-0.0028, w=2.0)        # radius -1.4 mm: rounded to -1
 def test_inverse_mapping_recovers_velocity(v: float, w: float) -> None:
     speed, radius = k.velocity_to_speed_radius(v, w)
     left, right = k.speed_radius_to_wheels(speed, radius)

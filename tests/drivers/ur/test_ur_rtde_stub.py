@@ -9,12 +9,13 @@ from collections.abc import Iterator
 
 import pytest
 import rtde_receive
+from urtest_helpers import start_stub, wait_for
+
 from mmexec.drivers.interfaces import GoalState, ManualClock
 from mmexec.drivers.ur import bringup
 from mmexec.drivers.ur.arm import MonotonicClock, URArm, URArmConfig, URConnectionError
 from mmexec.drivers.ur.fake import FakeURController
 from mmexec.drivers.ur.rtde_stub import RTDEStub
-from urtest_helpers import loopback_host, wait_for
 
 VARS = ["timestamp", "actual_q", "robot_mode", "safety_mode", "safety_status_bits", "runtime_state"]
 
@@ -22,7 +23,7 @@ VARS = ["timestamp", "actual_q", "robot_mode", "safety_mode", "safety_status_bit
 @pytest.fixture
 def stub() -> Iterator[RTDEStub]:
     baseline = threading.active_count()
-    s = RTDEStub(loopback_host()).start()
+    s = start_stub()
     yield s
     s.stop()
     assert not s.running()

@@ -3,20 +3,37 @@
 from __future__ import annotations
 
 import itertools
-import os
+import random
 import threading
 import time
 from collections.abc import Callable
 
 from mmexec.drivers.interfaces import Goal, ManualClock
 from mmexec.drivers.ur.arm import URArm
+from mmexec.drivers.ur.rtde_stub import RTDEStub, StubError
 
-_hosts = itertools.count((os.getpid() % 200) + 2)
+# a random start: two test processes (parallel runs on one machine) rarely share a sequence
+_hosts = itertools.count(random.SystemRandom().randrange(250))
 
 
 def loopback_host() -> str:
-    """A fresh 127.0.0.X address so stubs (which must use port 30004) never collide."""
+    """A fresh 127.0.0.X address so stubs (which must use port 30004) rarely collide."""
     return f"127.0.0.{next(_hosts) % 250 + 2}"
+
+
+def start_stub(attempts: int = 20) -> RTDEStub:
+    """An RTDE stub on a free loopback address: another process (a parallel test run) may
+    hold 30004 on the address tried, so move on to the next one, at most ``attempts``."""
+    error: StubError | None = None
+    for _ in range(attempts):
+        try:
+            return RTDEStub(loopback_host()).start()
+        except StubError as e:
+            if "Address already in use" not in str(e):
+                raise
+            error = e
+    assert error is not None
+    raise error
 
 
 def wait_for(pred: Callable[[], bool], timeout: float = 2.0) -> bool:
