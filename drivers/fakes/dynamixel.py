@@ -412,6 +412,12 @@ class FakeDxlBus(PtyDevice):
                 self._handle(item)
 
     def _reply(self, servo: FakeServo, error: int, data: bytes = b"") -> None:
+        self._send_status(self._status(servo, error, data))
+
+    def _status(self, servo: FakeServo, error: int, data: bytes = b"") -> tuple[bytes, float]:
+        """The status frame ``servo`` answers now, and its Return Delay [s]. Built before an
+        instruction's effect (reboot, factory reset) and sent after it, so the host never
+        sees a reply before the fake's state has changed."""
         if servo.alert:
             error |= _ALERT
         frame = codec.encode_status(servo.id, error, data)
@@ -421,7 +427,10 @@ class FakeDxlBus(PtyDevice):
         elif self.truncate_replies > 0:
             self.truncate_replies -= 1
             frame = frame[: len(frame) // 2]
-        delay = servo.get("return_delay_time") * 2e-6
+        return frame, servo.get("return_delay_time") * 2e-6
+
+    def _send_status(self, status: tuple[bytes, float]) -> None:
+        frame, delay = status
         if self.honour_return_delay and delay > 0:
             time.sleep(delay)
         self.send(frame)
@@ -481,10 +490,13 @@ class FakeDxlBus(PtyDevice):
             return self._each_reply(p, StatusResult.DATA_LENGTH_ERROR)
         address, data = int.from_bytes(p.params[:2], "little"), p.params[2:]
         self._count_goal(address, len(data))
-        for s, replies in self._addressed(p.id):
+        out = []
+        for s, replies in self._addressed(p.id):  # every servo acts, then the replies go out
             err = s.write(address, data, now)
             if replies and s.get("status_return_level") >= 2:
-                self._reply(s, err)
+                out.append((s, err))
+        for s, err in out:
+            self._reply(s, err)
 
     def _reg_write(self, p: Packet, now: float) -> None:
         if len(p.params) < 3:
@@ -499,6 +511,7 @@ class FakeDxlBus(PtyDevice):
                 self._reply(s, err)
 
     def _action(self, p: Packet, now: float) -> None:
+        out = []
         for s, replies in self._addressed(p.id):
             if s.registered is None:
                 err = StatusResult.INSTRUCTION_ERROR
@@ -509,26 +522,31 @@ class FakeDxlBus(PtyDevice):
                 self._count_goal(address, len(data))
                 err = s.write(address, data, now)
             if replies and s.get("status_return_level") >= 2:
-                self._reply(s, err)
+                out.append((s, err))
+        for s, err in out:
+            self._reply(s, err)
 
     def _reboot(self, p: Packet, now: float) -> None:
+        out = []
         for s, replies in self._addressed(p.id):
             if replies and s.get("status_return_level") >= 2:
-                self._reply(s, 0)
+                out.append(self._status(s, 0))  # answered as the servo was, sent after
             s.reboot(now)
             s.booting_until = now + self.reboot_time
+        for status in out:
+            self._send_status(status)
 
     def _factory_reset(self, p: Packet, now: float) -> None:
         option = p.params[0] if p.params else 0xFF
+        out = []
         for s, replies in self._addressed(p.id):
-            if s.torque:
-                err = StatusResult.ACCESS_ERROR
-            else:
-                err = 0
+            err = StatusResult.ACCESS_ERROR if s.torque else 0
             if replies:
-                self._reply(s, err)
+                out.append(self._status(s, err))  # answered as the servo was, sent after
             if not err:
                 s.factory_reset(option, now)
+        for status in out:
+            self._send_status(status)
 
     def _clear(self, p: Packet, now: float) -> None:
         ok = p.params == b"\x01" + codec.CLEAR_KEY
