@@ -221,7 +221,8 @@ class SimRobot(Robot):
         self.camera = SimCamera(core, intr, cfg.camera.near, cfg.camera.far, cfg.camera.noise, self.base, mount)
         if info.pan_tilt_joints:
             self.camera.set_pan_tilt(cfg.camera.pan, cfg.camera.tilt)
-        self.lidar = SimLidar(core, cfg.lidar.beams, cfg.lidar.range_min, cfg.lidar.range_max, cfg.lidar.noise)
+        self.lidar = SimLidar(core, cfg.lidar.beams, cfg.lidar.range_min, cfg.lidar.range_max, cfg.lidar.noise,
+                              reflectors=frozenset(r.name for r in world.spec.reflectors))
         self.truth = SimTruth(self)  #: SIM-ONLY ground truth (tests, campaign scoring)
         core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
         self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}

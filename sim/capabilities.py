@@ -20,6 +20,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 import pybullet as p
 
@@ -642,8 +643,8 @@ class SimCamera(Camera):
         view = np.linalg.inv(T_gl).T.reshape(-1).tolist()
         _, _, rgba, zbuf, _ = p.getCameraImage(width, height, view, proj, renderer=p.ER_TINY_RENDERER, shadow=0,
                                                flags=p.ER_NO_SEGMENTATION_MASK, physicsClientId=self._c.cid)
-        rgb = np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3]
-        return np.ascontiguousarray(rgb), np.asarray(zbuf, dtype=np.float32).reshape(height, width)
+        rgb = cv2.cvtColor(np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4), cv2.COLOR_RGBA2RGB)
+        return rgb, np.asarray(zbuf, dtype=np.float32).reshape(height, width)
 
     def frame(self) -> CameraFrame | None:
         c = self._c
@@ -668,10 +669,19 @@ class SimCamera(Camera):
 class SimLidar(Lidar):
     """360 degree planar scan by ray casting (``rayTestBatch``, ``numThreads=0``) in the
     lidar frame: ``beams`` rays from angle -pi CCW, ``range_min`` .. ``range_max`` [m],
-    Gaussian range ``noise`` std [m]; no return is ``inf``."""
+    Gaussian range ``noise`` std [m]; no return is ``inf``.
 
-    def __init__(self, core: SimCore, beams: int, range_min: float, range_max: float, noise: float) -> None:
+    ``intensities``: :attr:`REFLECTOR_INTENSITY` where the beam hits one of the world's
+    laser reflectors, :attr:`SURFACE_INTENSITY` on any other surface, 0 for no return."""
+
+    REFLECTOR_INTENSITY = 1.0
+    SURFACE_INTENSITY = 0.2
+
+    def __init__(self, core: SimCore, beams: int, range_min: float, range_max: float, noise: float,
+                 reflectors: frozenset[str] = frozenset()) -> None:
         self._c = core
+        names = core.scene.static_names
+        self._reflector_links = np.array([i for i, n in enumerate(names) if n in reflectors], dtype=int)
         self.beams, self.range_min, self.range_max, self.noise = beams, range_min, range_max, noise
         self._inc = 2 * math.pi / beams
         ang = -math.pi + self._inc * np.arange(beams)
@@ -690,10 +700,14 @@ class SimLidar(Lidar):
         ends = o + d * self.range_max
         hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=c.cid)
         frac = np.array([h[2] if h[0] >= 0 else np.inf for h in hits])
+        static = c.scene.static
+        refl = np.array([h[0] == static and h[1] in self._reflector_links for h in hits], dtype=bool)
+        intensity = np.where(np.isfinite(frac), self.SURFACE_INTENSITY, 0.0)
+        intensity[refl] = self.REFLECTOR_INTENSITY
         ranges = self.range_min + frac * (self.range_max - self.range_min)
         if self.noise > 0:
             ranges = ranges + c.rng.normal(0.0, self.noise, ranges.shape)
         self.scans += 1
         return LaserScan(angle_min=-math.pi, angle_increment=self._inc, ranges=ranges.astype(np.float64),
                          range_min=self.range_min, range_max=self.range_max, stamp=now,
-                         T_base_lidar=c.in_base(c.info.lidar_link))
+                         T_base_lidar=c.in_base(c.info.lidar_link), intensities=intensity)
