@@ -415,6 +415,9 @@ class LaserScan:
     range_max: float
     stamp: float
     T_base_lidar: np.ndarray = field(default_factory=lambda: np.eye(4))
+    #: per-beam return intensity in [0, 1] (same length as ``ranges``; 0 = no return,
+    #: 1 = retro-reflector), or None when the sensor gives none
+    intensities: np.ndarray | None = None
 
     @property
     def angles(self) -> np.ndarray:
