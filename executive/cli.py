@@ -176,6 +176,7 @@ def _load_for_mission(config: Path | None) -> Any:
     from mmexec.executive.config import load_config, load_skill_modules
 
     loaded = load_config(config) if config is not None else None
+    _preload_backend_quietly("sim")  # the built-in arm skills import pybullet: no banner
     load_skill_modules(loaded)
     return loaded
 
@@ -201,17 +202,64 @@ def _walk_specs(root: Any) -> Iterator[Any]:
                         stack.append(it.tree)
 
 
+#: Capabilities a simulated robot always has (``mmexec.sim.backend.SimRobot``).
+SIM_CAPABILITIES: frozenset[str] = frozenset({"base", "arm", "gripper", "camera", "lidar"})
+
+
+def _relocate(e: InputError, loaded: Any) -> InputError:
+    """``e`` with problems a builder could only place at ``<...>`` moved to ``backend:``."""
+    where = loaded.mark("backend")
+    return InputError(Problem(where, p.message) if p.mark.file.startswith("<") else p for p in e.problems)
+
+
+def binding_capabilities(loaded: Any) -> frozenset[str]:
+    """The capabilities the configured robot will have, found WITHOUT opening anything.
+
+    ``robot``: the section is checked by :func:`mmexec.drivers.robot.check` (no port,
+    socket or camera is opened) and the planned device slots are the capabilities.
+    ``mock``: the section's ``capabilities`` list. ``sim``: the section is bound and the
+    simulated robot's fixed set is returned (no physics client is started). Another
+    backend is built (it must then be cheap and in-memory) and closed again.
+    Raises :class:`InputError` for a bad section.
+    """
+    from mmexec.executive.config import BACKENDS, backend_builder, build_robot, robot_capabilities
+
+    backend = loaded.backend
+    section = loaded.section()
+    try:
+        if backend == "robot":
+            from mmexec.drivers.robot import check
+
+            planned = check(section, profile=dict(loaded.config.profile))
+            return frozenset(line.split(":", 1)[0].strip() for line in planned)
+        if backend == "mock":
+            from mmexec.drivers.mock.backend import parse_section as parse_mock
+
+            return frozenset(parse_mock(section, mark=loaded.mark("mock")).capabilities)
+        if backend == "sim":
+            backend_builder(backend, loaded.mark("backend"))  # a missing pybullet is a located error
+            from mmexec.sim.backend import parse_section as parse_sim
+
+            parse_sim(section)
+            return SIM_CAPABILITIES
+    except InputError as e:
+        raise _relocate(e, loaded) from None
+    if backend not in BACKENDS:
+        backend_builder(backend, loaded.mark("backend"))  # raises the located "unknown backend"
+    robot = build_robot(loaded, seed=None, options={"gui": False, "record": None})
+    try:
+        return robot_capabilities(robot)
+    finally:
+        robot.close()
+
+
 def _check_binding(mission: Any, loaded: Any) -> None:
-    """InputError for each skill leaf needing a capability the configured robot lacks."""
-    from mmexec.executive.config import build_robot, robot_capabilities
+    """InputError for each skill leaf needing a capability the configured robot lacks.
+    Nothing is opened: see :func:`binding_capabilities`."""
     from mmexec.skills.base import SkillSpec
 
     _preload_backend_quietly(loaded.backend)
-    robot = build_robot(loaded, seed=None, options={"gui": False, "record": None})
-    try:
-        caps = robot_capabilities(robot)
-    finally:
-        robot.close()
+    caps = binding_capabilities(loaded)
     problems: list[Problem] = []
     for spec in _walk_specs(mission.root_file.tree):
         skill = (getattr(spec, "opts", {}) or {}).get("skill")
