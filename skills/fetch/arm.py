@@ -16,6 +16,7 @@ base frame through the base pose (odometry) and the arm mount:
 from __future__ import annotations
 
 import logging
+import math
 import weakref
 from collections.abc import Generator, Sequence
 from dataclasses import dataclass
@@ -128,9 +129,34 @@ def _T_armbase_map(ctx: SkillContext) -> np.ndarray:
 
 
 def _q(ctx: SkillContext) -> list[float]:
+    """Measured joint positions [rad], clamped into the joint limits: a joint resting on
+    its limit reads a hair beyond it in physics (and on servos), which the planner would
+    reject as a start outside the limits."""
     arm = ctx.robot.arm
     assert arm is not None
-    return [float(x) for x in arm.state().positions]
+    q = [float(x) for x in arm.state().positions]
+    return [min(max(x, lim.lower), lim.upper) for x, lim in zip(q, arm.limits)]
+
+
+def _ik_seeds(ctx: SkillContext, ws: ArmWorkspace, T_target: np.ndarray) -> list[list[float]]:
+    """IK starts for a tool pose: the profile's ``fetch.arm.reach`` posture (if any) and
+    the current posture, each with the first (yaw) joint turned so the tool points at
+    the target's bearing. They keep IK in the arm's natural solution family (elbow up,
+    wrist not flipped) instead of whatever a random restart converges to."""
+    seeds: list[list[float]] = []
+    names = [n for n in (ws.settings.reach,) if n]
+    postures = [_named_q(ctx, n) for n in names] + [_q(ctx)]
+    bearing = math.atan2(float(T_target[1, 3]), float(T_target[0, 3]))
+    lo, hi = ws.kin.limits[0].lower, ws.kin.limits[0].upper
+    for q in postures:
+        p = ws.kin.fk(q)[:3, 3]
+        yaw = q[0] + _wrap(bearing - math.atan2(float(p[1]), float(p[0])))
+        seeds.append([min(max(yaw, lo), hi), *q[1:]])
+    return seeds
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _planned(ctx: SkillContext, result: PlanResult, what: str) -> PlanResult:
@@ -298,7 +324,8 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     poses = grasp_poses(T_am_marker, ws.kin.approach_axis, pre_grasp=prof.pre_grasp, grasp_depth=prof.grasp_depth,
                         retract=prof.retract)
     q = _q(ctx)
-    pre = _planned(ctx, ws.planner.plan_to_pose(q, poses.pre_grasp, config=cfg), "pre-grasp")
+    pre = _planned(ctx, ws.planner.plan_to_pose(q, poses.pre_grasp, ik_seeds=_ik_seeds(ctx, ws, poses.pre_grasp),
+                                                config=cfg), "pre-grasp")
     yield from _gripper(ctx, None, prof.grasp_force)
     yield from _execute(ctx, pre, "pre-grasp")
     # the fingers must touch the item: take it out of the scene for the straight approach
@@ -320,7 +347,7 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     line = ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg)
     if not line.success:  # the straight line folds the arm into itself: plan a way instead
         log.info("retract: %s; planning to the retract pose", line.reason)
-        line = ws.planner.plan_to_pose(q_grasp, poses.retract, config=cfg)
+        line = ws.planner.plan_to_pose(q_grasp, poses.retract, ik_seeds=[q_grasp], config=cfg)
     out = _planned(ctx, line, "retract")
     yield from _execute(ctx, out, "retract")
     if ctx.robot.base is not None:
@@ -374,7 +401,8 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     bp = base.state().pose if base is not None else None
     T_map_place = _place_frame(prof.depot.place, (bp.x, bp.y) if bp is not None else (0.0, 0.0))
     poses = place_poses(T_am @ T_map_place, ws.kin.approach_axis, retract=prof.place_retract)
-    res = _planned(ctx, ws.planner.plan_to_pose(_q(ctx), poses.place, config=cfg), "place pose")
+    res = _planned(ctx, ws.planner.plan_to_pose(_q(ctx), poses.place, ik_seeds=_ik_seeds(ctx, ws, poses.place),
+                                                config=cfg), "place pose")
     yield from _execute(ctx, res, "place pose")
     yield from _gripper(ctx, None, prof.grasp_force)
     q = _q(ctx)

@@ -97,7 +97,9 @@ class ArmSettings:
     OMPL ``algorithm``, ``time_limit`` [s] per attempt, ``attempts``, ``velocity_scale``
     and ``acceleration_scale`` (fractions of the joint limits), and the named poses
     (keys of the profile's ``named_poses``) used to ``stow`` the arm while driving,
-    ``carry`` an item, and ``look`` with an arm-mounted camera (None: camera not on the arm)."""
+    ``carry`` an item, ``look`` with an arm-mounted camera (None: camera not on the arm),
+    and ``reach``: the posture that seeds IK for pick and place poses (its yaw joint
+    turned towards the target; None: the current posture only)."""
 
     model: Literal["locobot_wx250s", "ur5e_robotiq"] = "locobot_wx250s"
     tcp_offset: float = 0.155
@@ -109,6 +111,7 @@ class ArmSettings:
     stow: str = "sleep"
     carry: str = "sleep"
     look: str | None = None
+    reach: str | None = None
 
     def validate(self) -> list[str]:
         out = []

@@ -295,13 +295,23 @@ class ArmPlanner:
         *,
         free_approach_rotation: bool = False,
         ik_attempts: int = 20,
+        ik_seeds: Sequence[Sequence[float]] = (),
         config: PlannerConfig | None = None,
     ) -> PlanResult:
         """Plan to a tool pose ``T_target`` (4x4 in the arm base): a collision-free IK
-        solution (seeded from ``q_start``) then :meth:`plan`."""
+        solution then :meth:`plan`. IK starts from each of ``ik_seeds`` [rad] in order
+        (a nominal posture picks the solution family: elbow up, wrist not flipped), then
+        from ``q_start`` and seeded random configurations."""
         t0 = time.perf_counter()
-        q_goal = self.kin.ik(T_target, q_start, free_approach_rotation=free_approach_rotation,
-                             attempts=ik_attempts, is_valid=self.scene.is_valid)
+        q_goal = None
+        for s in ik_seeds:
+            q_goal = self.kin.ik(T_target, s, free_approach_rotation=free_approach_rotation, attempts=1,
+                                 is_valid=self.scene.is_valid)
+            if q_goal is not None:
+                break
+        if q_goal is None:
+            q_goal = self.kin.ik(T_target, q_start, free_approach_rotation=free_approach_rotation,
+                                 attempts=ik_attempts, is_valid=self.scene.is_valid)
         if q_goal is None:
             reason = "no IK" if self.kin.ik(T_target, q_start, free_approach_rotation=free_approach_rotation,
                                              attempts=ik_attempts) is None else "no collision-free IK"
