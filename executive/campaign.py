@@ -133,7 +133,10 @@ _NOMINAL: dict[str, dict[str, Any]] = {
 
 
 def _profile(name: str, description: str, **specific: dict[str, Any]) -> FaultProfile:
-    patches = {b: (_NOMINAL[b],) + ((specific[b],) if b in specific else ()) for b in _NOMINAL}
+    """Nominal plus one fault, for the backends that ``specific`` names (all backends
+    with a nominal patch when it names none)."""
+    backends = list(specific) or list(_NOMINAL)
+    patches = {b: (_NOMINAL[b],) + ((specific[b],) if b in specific else ()) for b in backends}
     return FaultProfile(name, description, patches)
 
 
@@ -554,14 +557,22 @@ class Campaign:
         staged = self.dir / "config.yaml.new"
         _dump_config(cfg, staged, header)
         plan = o.requests
+        _quiet_import_pybullet()
         # Preflight with the runner itself: config (as trials will see it), skill modules,
         # mission, every trial's requests; nothing is connected.
         seeds = [trial_seed(o.seed, i) for i in range(o.trials)]
         per_trial = [plan.requests_for(s) for s in seeds]
-        probe = Runner(RunOptions(mission=o.mission, config=staged,
-                                  requests=[Request({k: _cli_value(v) for k, v in r.items()},
-                                                    ArgMark("trial", i, 0)) for i, reqs in enumerate(per_trial)
-                                            for r in reqs]))
+        # each distinct request once, located at the option it came from
+        distinct: dict[str, Request] = {}
+        for i, reqs in enumerate(per_trial):
+            for j, r in enumerate(reqs):
+                key = json.dumps({k: _cli_value(v) for k, v in r.items()}, sort_keys=True)
+                if key not in distinct and (r or not plan.draws):
+                    where = (ArgMark(f"--draw (trial {i:04d})", 0, 0) if plan.draws
+                             else ArgMark("--request/--requests", j + 1, 1) if plan.fixed
+                             else ArgMark("mmexec campaign (no --request or --draw given)", 0, 0))
+                    distinct[key] = Request({k: _cli_value(v) for k, v in r.items()}, where)
+        probe = Runner(RunOptions(mission=o.mission, config=staged, requests=list(distinct.values())))
         try:
             probe.prepare()
             if o.params:
@@ -703,10 +714,39 @@ def _input_error_from_trial(result: TrialResult) -> InputError:
     return InputError.at(ArgMark(f"trial {result.index:04d}", 0, 0), f"{text} (command: {result.command})")
 
 
+def _silence_stderr() -> None:
+    """Pool worker initializer: point file descriptor 2 at /dev/null, so C-level banners
+    (pybullet's build line) printed while a worker imports do not reach the console.
+    Trials write their own output to DIR/trials/NNNN.out; worker exceptions come back
+    through the futures."""
+    fd = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(fd, 2)
+    os.close(fd)
+
+
+def _quiet_import_pybullet() -> None:
+    """Import pybullet (if installed) with its build banner silenced, before the
+    preflight loads skill modules that import it."""
+    if "pybullet" in sys.modules:
+        return
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        _silence_stderr()
+        try:
+            import pybullet  # noqa: F401
+        except ImportError:
+            log.debug("pybullet not installed; sim trials will report it")
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def _run_local(specs: Sequence[TrialSpec], workers: int, _address: str | None) -> Iterable[TrialResult]:
     """Trials on a spawn-context ProcessPoolExecutor, yielded as they finish."""
     ctx = multiprocessing.get_context("spawn")
-    pool = concurrent.futures.ProcessPoolExecutor(max_workers=max(1, min(workers, len(specs))), mp_context=ctx)
+    pool = concurrent.futures.ProcessPoolExecutor(max_workers=max(1, min(workers, len(specs))), mp_context=ctx,
+                                               initializer=_silence_stderr)
     futures = {pool.submit(run_trial, s): s for s in specs}
     try:
         for fut in concurrent.futures.as_completed(futures):

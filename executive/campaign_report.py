@@ -59,7 +59,9 @@ def wilson_interval(successes: int, trials: int, z: float = Z95) -> tuple[float,
     denom = 1.0 + z2 / n
     centre = (p + z2 / (2.0 * n)) / denom
     half = z * math.sqrt(p * (1.0 - p) / n + z2 / (4.0 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    lower = 0.0 if successes == 0 else max(0.0, centre - half)
+    upper = 1.0 if successes == trials else min(1.0, centre + half)
+    return (lower, upper)
 
 
 def _stats(values: Sequence[float]) -> dict[str, Any]:
@@ -168,8 +170,8 @@ def _plots(out_dir: Path, results: Sequence[TrialResult], summary: Mapping[str, 
         rows = [("this campaign", summary)] + list(compare)
         names = [_label(name, s) for name, s in rows]
         rates = [s["success_rate"] for _, s in rows]
-        lo = [s["success_rate"] - s["success_rate_ci95"][0] for _, s in rows]
-        hi = [s["success_rate_ci95"][1] - s["success_rate"] for _, s in rows]
+        lo = [max(0.0, s["success_rate"] - s["success_rate_ci95"][0]) for _, s in rows]
+        hi = [max(0.0, s["success_rate_ci95"][1] - s["success_rate"]) for _, s in rows]
         fig, ax = plt.subplots(figsize=(6.4, 3.6))
         ax.bar(range(len(rows)), rates, yerr=[lo, hi], capsize=6, color="#48c")
         ax.set_xticks(range(len(rows)), names, fontsize=8)

@@ -74,6 +74,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--watch", action="store_true", help="reload the mission between requests when it changes")
     r.add_argument("--gui", action="store_true", help="show the simulator window (sim backend)")
     r.add_argument("--record", type=Path, metavar="FILE", help="record a video (sim backend)")
+    r.add_argument("--no-recovery", action="store_true", help="disable every recovery node (ablation)")
 
     lg = sub.add_parser("log", help="read an event log")
     lsub = lg.add_subparsers(dest="log_command", metavar="ACTION", parser_class=_Parser)
@@ -84,6 +85,9 @@ def _parser() -> argparse.ArgumentParser:
     lr.add_argument("--step", action="store_true", help="wait for Enter between steps")
     lr.add_argument("--request", type=int, metavar="N", help="only request N (1-based)")
 
+    from mmexec.executive.campaign import add_campaign_parser
+
+    add_campaign_parser(sub)
     sub.add_parser("demo", help="run the embedded demo (mock backend, two requests)")
     sub.add_parser("hw", help="hardware bring-up tools (mmexec hw --help)", add_help=False)
     return p
@@ -331,6 +335,7 @@ def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namesp
         opts.seed, opts.log_path, opts.rate_hz = args.seed, args.log, args.rate
         opts.watch, opts.gui, opts.record = args.watch, args.gui, args.record
         opts.request_timeout = args.request_timeout
+        opts.recovery_enabled = not getattr(args, "no_recovery", False)
         if opts.request_timeout is not None and opts.request_timeout <= 0:
             raise InputError.at(ArgMark("--request-timeout", 1, 1), "expected seconds > 0")
     _preload_backend_quietly(load_config(config).backend)
@@ -435,6 +440,10 @@ def _dispatch(argv: list[str]) -> int:
         return _cmd_log(args)
     if args.command == "demo":
         return _cmd_demo(argv)
+    if args.command == "campaign":
+        from mmexec.executive.campaign import cmd_campaign
+
+        return cmd_campaign(args)
     raise UsageError(f"mmexec: unknown command {args.command!r}")
 
 
