@@ -7,7 +7,8 @@ answered, otherwise it prints one line to stderr naming the port and what went w
 frames, servo fault) and exits 1 -- never a traceback.
 
 ``run_fake`` starts a :class:`~mmexec.drivers.fakes.dynamixel.FakeDxlBus` with a WX250s
-(``--locobot`` adds pan/tilt), prints its port on one line and serves until SIGINT/SIGTERM.
+(``--locobot`` adds pan/tilt; ``--missing IDS`` and ``--hardware-error ID:FAULT`` rehearse
+the faults), prints its port on one line and serves until SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import signal
 import sys
 import threading
 from types import FrameType
+from typing import TYPE_CHECKING
 
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,
@@ -31,7 +33,10 @@ from mmexec.drivers.dynamixel.bus import (
 )
 from mmexec.drivers.dynamixel.control_table import MODELS, decode_hardware_error
 
-__all__ = ["add_fake_arguments", "add_ping_arguments", "parse_ids", "ping", "run_fake"]
+__all__ = ["add_fake_arguments", "add_ping_arguments", "make_fake", "parse_ids", "ping", "run_fake"]
+
+if TYPE_CHECKING:
+    from mmexec.drivers.fakes.dynamixel import FakeDxlBus
 
 DEVICE = "dynamixel"
 
@@ -84,6 +89,7 @@ def ping(args: argparse.Namespace) -> int:
     found: dict[int, PingInfo] = {}
     missing: list[int] = []
     corrupt: list[int] = []
+    faulted: list[str] = []
     try:
         bus.open()
         for dxl_id in ids:
@@ -112,6 +118,7 @@ def ping(args: argparse.Namespace) -> int:
                 faults = ()
             if faults:
                 line += f", HARDWARE ERROR: {', '.join(faults)}"
+                faulted.append(f"id {dxl_id} {'+'.join(faults)}")
             print(line)
     except PortUnavailable as e:
         print(f"{DEVICE} {port}: {e.detail}", file=sys.stderr)
@@ -142,6 +149,13 @@ def ping(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 1
+    if faulted:
+        print(
+            f"{DEVICE} {port}: servo fault: {', '.join(faulted)} (torque is off: find the cause, "
+            "then reboot the servo, e.g. power-cycle or WX250s.reboot())",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 
@@ -154,18 +168,51 @@ def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="start with the Interbotix EEPROM settings already applied",
     )
+    parser.add_argument(
+        "--missing", default="", metavar="IDS",
+        help="ids that never answer, e.g. 5 or 4-5 (an unplugged or dead servo)",
+    )
+    parser.add_argument(
+        "--hardware-error", action="append", default=[], metavar="ID:FAULT[+FAULT]",
+        help="start a servo in Hardware Error, e.g. 4:overload (overload, overheating, "
+        "input_voltage, motor_encoder, electrical_shock); repeatable",
+    )
+
+
+def make_fake(args: argparse.Namespace) -> FakeDxlBus:
+    """The fake ``run_fake`` serves, with the fault switches of the arguments applied
+    (not started). ValueError naming the bad argument."""
+    from mmexec.drivers.fakes.dynamixel import FakeDxlBus, wx250s_servos
+
+    fake = FakeDxlBus(wx250s_servos(locobot=bool(args.locobot), configured=bool(args.configured)))
+    known = {s.id for s in fake.servos}
+    for dxl_id in parse_ids(args.missing) if args.missing else []:
+        if dxl_id not in known:
+            raise ValueError(f"--missing: no servo with id {dxl_id} (ids {min(known)}-{max(known)})")
+        fake.servo(dxl_id).present = False
+    for spec in args.hardware_error:
+        sid, _, names = spec.partition(":")
+        if not sid.strip().isdigit() or int(sid) not in known or not names:
+            raise ValueError(f"--hardware-error: expected ID:FAULT with an id of the arm, got {spec!r}")
+        try:
+            fake.inject_hardware_error(int(sid), *names.split("+"))
+        except KeyError as e:
+            raise ValueError(f"--hardware-error: {e.args[0]}") from None
+    return fake
 
 
 def run_fake(args: argparse.Namespace) -> int:
-    from mmexec.drivers.fakes.dynamixel import FakeDxlBus, wx250s_servos
-
+    try:
+        fake = make_fake(args)
+    except ValueError as e:
+        print(f"{DEVICE} fake: {e}", file=sys.stderr)
+        return 2
     done = threading.Event()
 
     def _stop(signum: int, frame: FrameType | None) -> None:
         done.set()
 
     old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    fake = FakeDxlBus(wx250s_servos(locobot=bool(args.locobot), configured=bool(args.configured)))
     try:
         fake.start()
         print(fake.port, flush=True)

@@ -118,6 +118,9 @@ def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
                         help="an object between the fingers [m] that stops them closing")
     parser.add_argument("--time-scale", type=float, default=1.0,
                         help="run the fake's time this many times faster")
+    parser.add_argument("--fault", type=lambda t: int(t, 0), default=None, metavar="CODE",
+                        help="start with gFLT CODE, e.g. 0x0A (major faults 0x0A/0x0C/0x0E "
+                             "stay until re-activation; 0x08 over-temperature)")
 
 
 def run_fake(args: argparse.Namespace) -> int:
@@ -127,6 +130,12 @@ def run_fake(args: argparse.Namespace) -> int:
 
     model = GripperModel(activation_time=args.activation_time, time_scale=args.time_scale,
                          object_width=args.object_width)
+    if args.fault is not None:
+        try:
+            model.inject_fault(args.fault)
+        except ValueError as e:
+            print(f"robotiq fake: --fault: {e}", file=sys.stderr)
+            return 2
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:

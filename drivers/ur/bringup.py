@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import signal
 import socket
+import sys
 import threading
 import time
 from collections.abc import Sequence
@@ -153,13 +154,13 @@ def ping(args: argparse.Namespace) -> int:
     try:
         res = probe(args.host, args.port, args.timeout)
     except URPingError as e:
-        print(f"ur: {e}")
+        print(f"ur {e}", file=sys.stderr)
         return 1
     q = res.q
     if args.port == 30004:
         got = _receive_in_thread(args.host, args.timeout)
         if "error" in got:
-            print(f"ur: {args.host}:{args.port}: ur_rtde: {got['error']}")
+            print(f"ur {args.host}:{args.port}: ur_rtde: {got['error']}", file=sys.stderr)
             return 1
         q = tuple(got["q"])
     print(f"ur {args.host}:{args.port}: controller {res.version}")
@@ -185,7 +186,7 @@ def run_fake(args: argparse.Namespace) -> int:
     try:
         stub.start()
     except StubError as e:
-        print(f"ur fake: {e}")
+        print(f"ur fake: {e}", file=sys.stderr)
         return 1
     print(f"{stub.host}:{stub.port}", flush=True)
     stop = threading.Event()

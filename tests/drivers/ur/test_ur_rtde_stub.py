@@ -157,11 +157,12 @@ def test_ping_failures_are_one_line(stub: RTDEStub, capsys: pytest.CaptureFixtur
     assert bringup.ping(_ping_args(stub.host, timeout=0.3)) == 1
     stub.refuse_connections(True)
     assert bringup.ping(_ping_args(stub.host)) == 1
-    lines = capsys.readouterr().out.splitlines()
-    assert lines == [
-        f"ur: {stub.host}:30004: controller answered NOT_FOUND for runtime_state",
-        f"ur: {stub.host}:30004: no answer within 0.3 s (waiting for 'U')",
-        f"ur: {stub.host}:30004: connection refused (is the controller on and RTDE enabled?)",
+    out = capsys.readouterr()
+    assert out.out == ""  # errors go to stderr, one line each, like every `mmexec hw ping`
+    assert out.err.splitlines() == [
+        f"ur {stub.host}:30004: controller answered NOT_FOUND for runtime_state",
+        f"ur {stub.host}:30004: no answer within 0.3 s (waiting for 'U')",
+        f"ur {stub.host}:30004: connection refused (is the controller on and RTDE enabled?)",
     ]
 
 

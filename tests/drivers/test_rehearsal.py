@@ -1,0 +1,105 @@
+"""The bring-up rehearsal of docs/drivers/fakes.md, step by step: start each fake as
+``mmexec hw fake DEVICE`` (a real process, as a user would), ``mmexec hw ping`` it, start it
+again with a fault switch and see the one-line error and the non-zero exit."""
+
+from __future__ import annotations
+
+import os
+import random
+import selectors
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pytest
+
+from mmexec.drivers.hwcli import main
+
+HW = [sys.executable, "-m", "mmexec.drivers.hwcli"]
+
+
+@contextmanager
+def fake_process(*args: str, timeout: float = 15.0) -> Iterator[str]:
+    """Run ``mmexec hw fake ARGS``; yield the port it prints (bounded wait); SIGINT at exit."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([*HW, "fake", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    try:
+        assert proc.stdout is not None
+        sel = selectors.DefaultSelector()
+        sel.register(proc.stdout, selectors.EVENT_READ)
+        deadline = time.monotonic() + timeout
+        while not sel.select(0.1):
+            assert proc.poll() is None, f"fake exited: {proc.stderr.read() if proc.stderr else ''}"
+            assert time.monotonic() < deadline, f"fake {args} printed no port within {timeout} s"
+        sel.close()
+        yield proc.stdout.readline().strip()
+        proc.send_signal(signal.SIGINT)
+        assert proc.wait(timeout=10) == 0
+        assert "Traceback" not in (proc.stderr.read() if proc.stderr else "")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=5)
+
+
+def ping(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
+    rc = main(["ping", *args])
+    out = capsys.readouterr()
+    assert "Traceback" not in out.out + out.err
+    return rc, out.out, out.err.strip()
+
+
+def test_kobuki(capsys: pytest.CaptureFixture[str]) -> None:
+    with fake_process("kobuki") as port:
+        rc, out, err = ping(capsys, "kobuki", "--port", port)
+        assert rc == 0 and out.startswith(f"kobuki on {port}: firmware 1.2.0") and err == ""
+    with fake_process("kobuki", "--firmware", "2.0.0") as port:
+        rc, out, err = ping(capsys, "kobuki", "--port", port)
+        assert rc == 1 and "\n" not in err and err.startswith(f"kobuki on {port}: ")
+        assert "firmware 2.0.0 is not supported" in err
+
+
+def test_dynamixel(capsys: pytest.CaptureFixture[str]) -> None:
+    with fake_process("dynamixel", "--missing", "5", "--hardware-error", "4:overload") as port:
+        rc, out, err = ping(capsys, "dynamixel", "--port", port, "--ids", "1-9", "--latency-ms", "20")
+        assert rc == 1 and err == f"dynamixel {port}: no answer within the deadline from ids 5"
+        assert "id 4: XM430-W350 (model 1020), firmware 46, HARDWARE ERROR: overload" in out
+        rc, out, err = ping(capsys, "dynamixel", "--port", port, "--ids", "1-4", "--latency-ms", "20")
+        assert rc == 1 and err.startswith(f"dynamixel {port}: servo fault: id 4 overload (torque is off")
+    with fake_process("dynamixel") as port:
+        rc, out, err = ping(capsys, "dynamixel", "--port", port, "--latency-ms", "20")
+        assert rc == 0 and len(out.splitlines()) == 9 and err == ""
+
+
+def test_dynamixel_bad_fault_switch_is_one_line() -> None:
+    result = subprocess.run([*HW, "fake", "dynamixel", "--hardware-error", "4:overlaod"],
+                            capture_output=True, text=True, timeout=30)
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.strip() == ("dynamixel fake: --hardware-error: unknown hardware fault "
+                                     "'overlaod' (known: input_voltage, overheating, "
+                                     "motor_encoder, electrical_shock, overload)")
+
+
+def test_robotiq(capsys: pytest.CaptureFixture[str]) -> None:
+    with fake_process("robotiq", "--activation-time", "0.2") as port:
+        rc, out, err = ping(capsys, "robotiq", "--port", port, "--activate")
+        assert rc == 0 and out.startswith(f"robotiq on {port}: activated") and err == ""
+    with fake_process("robotiq", "--fault", "0x0A") as port:
+        rc, out, err = ping(capsys, "robotiq", "--port", port)
+        assert rc == 1 and err.startswith(f"robotiq on {port}: device fault: ")
+        assert "fault 0x0A under-voltage" in err and "\n" not in err
+
+
+def test_ur(capsys: pytest.CaptureFixture[str]) -> None:
+    # the RTDE port is fixed (30004): a random loopback address keeps parallel runs apart
+    host = f"127.0.0.{random.SystemRandom().randrange(2, 250)}"
+    with fake_process("ur", "--host", host) as where:
+        assert where == f"{host}:30004"
+        rc, out, err = ping(capsys, "ur", "--host", host)
+        assert rc == 0 and out.startswith(f"ur {host}:30004: controller ") and err == ""
+    rc, out, err = ping(capsys, "ur", "--host", host, "--timeout", "0.5")  # the fake is gone
+    assert rc == 1 and out == "" and "\n" not in err and err.startswith(f"ur {host}:30004: ")
