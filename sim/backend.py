@@ -313,8 +313,16 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
         world = load_world(cfg.world, seed=seed, randomize=cfg.randomize, mark=wmark,
                            extra_obstacles=blocking_obstacles(world, cfg.faults.nav_blocked, cfg.faults.nav_blocked_depth))
     record = options.get("record")
-    if record is not None and Path(record).suffix.lower() not in (".mp4", ".gif"):
-        raise SimError(f"--record {record}: the file must end in .mp4 or .gif")
+    if record is not None:
+        rp = Path(record)
+        if rp.suffix.lower() not in (".mp4", ".gif"):
+            raise SimError(f"--record {record}: the file must end in .mp4 or .gif")
+        try:
+            rp.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise SimError(f"--record {record}: cannot create the folder {rp.parent} ({e.strerror or e})") from e
+        if not os.access(rp.parent, os.W_OK):
+            raise SimError(f"--record {record}: the folder {rp.parent} is not writable")
     if options.get("gui"):
         if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
             raise SimError("--gui: no display (DISPLAY is not set); run headless or under a desktop session")

@@ -233,3 +233,57 @@ def test_record_writes_a_gif(tmp_path, sim_section, bench_world):
 
     frames = imageio.mimread(str(out))
     assert len(frames) == 3 and frames[0].shape[:2] == (60, 80)
+
+
+def test_record_writes_an_mp4(tmp_path, sim_section, bench_world):
+    import imageio.v2 as imageio
+    import pybullet as p
+
+    out = tmp_path / "sub" / "run.mp4"
+    r = build(sim_section(f"world: {bench_world}\nphysics_hz: 60\n"), profile={}, seed=0, options={"record": out})
+    r.recorder.size = (64, 48)
+    r.recorder._proj = p.computeProjectionMatrixFOV(60.0, 64 / 48, 0.05, 20.0, physicsClientId=r.cid)
+    for _ in range(20):
+        r.base.set_velocity(0.0, 1.5)
+        r.spin(0.1)
+    r.close()
+    frames = imageio.mimread(str(out), format="FFMPEG")
+    assert len(frames) == 4 and frames[0].shape[:2] == (48, 64)
+    assert float(np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean()) > 1.0  # the view turned
+
+
+@pytest.mark.parametrize("name, msg", [("x.avi", "must end in .mp4 or .gif"), ("afile/x.mp4", "cannot create the folder")])
+def test_bad_record_path_is_a_sim_error_at_build(tmp_path, name, msg):
+    (tmp_path / "afile").write_text("")
+    with pytest.raises(SimError, match=msg):
+        build(None, profile={}, seed=0, options={"record": tmp_path / name})
+
+
+def test_one_pad_contact_is_not_a_grasp(sim_section):
+    """The box is pressed against a fixed post: the +y pad touches the box, the -y pad only
+    the post, so closing stops early without a grasp."""
+    from pathlib import Path
+
+    world = Path(__file__).parent / "data" / "onepad.yaml"
+    r = build(sim_section(f"world: {world}\n"), profile={}, seed=0, options={})
+    try:
+        _grasp_setup(r)
+        slim = r.scene_handles.items["slim"]
+        g = r.gripper.close(force=5.0)
+        touched: list[set[int]] = [set(), set()]
+        while not g.done() and r.clock.now() < 30.0:
+            r.spin(0.05)
+            for pad, bodies in zip(touched, r.gripper._contacts()):
+                pad |= bodies
+        assert g.state is GoalState.SUCCEEDED
+        st = g.result
+        assert st.grasp is GraspState.AT_POSITION and not st.holding and r.truth.held_item() is None
+        assert st.width > 0.035  # stopped on the box and the post, far from the 30 mm closed width
+        assert [slim in t for t in touched].count(True) == 1  # only one pad ever touched the box
+        assert r.scene_handles.static in touched[0] | touched[1]  # the other stopped on the post
+        z0 = r.truth.item_pose("slim")[2, 3]
+        g = _run(r, r.arm.move_to([0.0, -0.3, 0.0, 0.0, 0.3, 0.0]))
+        r.spin(0.5)
+        assert r.truth.item_pose("slim")[2, 3] < z0 + 0.01  # not lifted
+    finally:
+        r.close()
