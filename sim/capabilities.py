@@ -102,6 +102,15 @@ class SimCore:
             pose = self.true_pose
             q = p.getQuaternionFromEuler((0.0, 0.0, pose.theta))
             p.resetBasePositionAndOrientation(self.body, (pose.x, pose.y, 0.0), q, physicsClientId=self.cid)
+            if self.held_body is not None and self._placed is not None:
+                # The base is placed kinematically, so the solver never sees its velocity: a
+                # held item would only be dragged after the tool by the force-limited grasp
+                # constraint, lagging ~v*dt/ERP (2 cm at 0.2 m/s) and counted as dropped.
+                # A gripper carries what it holds with the base: move it by the same step.
+                step = pose.matrix() @ np.linalg.inv(self._placed.matrix())
+                ipos, iorn = p.getBasePositionAndOrientation(self.held_body, physicsClientId=self.cid)
+                T = step @ _mat(ipos, iorn)
+                p.resetBasePositionAndOrientation(self.held_body, *_pose7(T), physicsClientId=self.cid)
             self._placed = pose
 
     def link_T(self, name: str) -> np.ndarray:
@@ -578,8 +587,9 @@ class SimGripper(Gripper):
             c.faults.fired.append((now, f"grasp_slip {name}"))
             self._release(GraspState.DROPPED)
             return
+        T_tool = c.link_T(c.info.tool_link)  # first: placing the base moves the held item too
         pos, orn = p.getBasePositionAndOrientation(body, physicsClientId=c.cid)
-        rel = np.linalg.inv(c.link_T(c.info.tool_link)) @ _mat(pos, orn)
+        rel = np.linalg.inv(T_tool) @ _mat(pos, orn)
         assert self._hold_T is not None
         if np.linalg.norm(rel[:3, 3] - self._hold_T[:3, 3]) > 0.015:
             self._release(GraspState.DROPPED)
