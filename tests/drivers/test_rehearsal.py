@@ -77,7 +77,7 @@ def test_dynamixel(capsys: pytest.CaptureFixture[str]) -> None:
 
 def test_dynamixel_bad_fault_switch_is_one_line() -> None:
     result = subprocess.run([*HW, "fake", "dynamixel", "--hardware-error", "4:overlaod"],
-                            capture_output=True, text=True, timeout=30)
+                            capture_output=True, text=True, timeout=30, check=False)
     assert result.returncode == 2 and result.stdout == ""
     assert result.stderr.strip() == ("dynamixel fake: --hardware-error: unknown hardware fault "
                                      "'overlaod' (known: input_voltage, overheating, "
