@@ -136,16 +136,34 @@ def marker_pose_candidates(
 ) -> list[tuple[np.ndarray, float]]:
     """Both IPPE solutions ``(T_camera_marker, rms_px)``, best reprojection first. A small
     or far marker seen nearly head-on has two poses mirrored about the line of sight with
-    similar errors (the planar-pose ambiguity); depth can tell them apart."""
+    similar errors (the planar-pose ambiguity); depth can tell them apart. When IPPE fails
+    (no finite solution, or none within 0.5 px) SQPnP's solution is added."""
     K = intrinsics.matrix()
     dist = np.asarray(intrinsics.dist, dtype=np.float64)
     obj = marker_object_points(length)
     img = np.asarray(corners, dtype=np.float64).reshape(4, 1, 2)
-    n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, K, dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
-    if not n:
+    out = _pnp(obj, img, K, dist, cv2.SOLVEPNP_IPPE_SQUARE)
+    if not out or min(e for _, e in out) > 0.5:
+        # IPPE_SQUARE degenerates for a square seen exactly fronto-parallel (NaN, or a
+        # pose tilted by degrees with a sub-pixel-looking error): add SQPnP's solution
+        out += _pnp(obj, img, K, dist, cv2.SOLVEPNP_SQPNP)
+    if not out:
         raise ValueError("solvePnP failed on the marker corners")
+    out.sort(key=lambda x: x[1])
+    return out
+
+
+def _pnp(obj: np.ndarray, img: np.ndarray, K: np.ndarray, dist: np.ndarray, flag: int) -> list[tuple[np.ndarray, float]]:
+    """Finite solutions ``(T_camera_marker, rms_px)`` of ``solvePnPGeneric`` with ``flag``."""
+    try:
+        n, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, K, dist, flags=flag)
+    except cv2.error as e:
+        log.debug("solvePnP (flag %d) failed: %s", flag, e)
+        return []
     out = []
-    for rvec, tvec in zip(rvecs, tvecs):
+    for rvec, tvec in list(zip(rvecs, tvecs))[: n or 0]:
+        if not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
+            continue
         R, _ = cv2.Rodrigues(rvec)
         T = np.eye(4)
         T[:3, :3] = R
@@ -153,7 +171,6 @@ def marker_pose_candidates(
         proj, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
         err = float(np.sqrt(np.mean(np.sum((proj.reshape(4, 2) - img.reshape(4, 2)) ** 2, axis=1))))
         out.append((T, err))
-    out.sort(key=lambda x: x[1])
     return out
 
 

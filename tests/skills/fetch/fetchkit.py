@@ -40,7 +40,7 @@ class MarkerCamera(Camera):
     it and with its centre inside the image. ``headings`` records the base heading [rad]
     at every frame() call (the views a search checks)."""
 
-    def __init__(self, robot: MockRobot, markers: dict[int, np.ndarray], *, width: int = 160, height: int = 120,
+    def __init__(self, robot: MockRobot, markers: dict[int, np.ndarray], *, width: int = 320, height: int = 240,
                  hfov: float = 0.5, max_range: float = 4.0) -> None:
         self._robot = robot
         self.markers = markers

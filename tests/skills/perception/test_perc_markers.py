@@ -178,3 +178,19 @@ def test_render_markers_view_depth_follows_each_marker_plane():
     # a marker facing away is not drawn
     away = look_at_marker(1.0, yaw=math.pi)
     assert np.isnan(render_markers_view(K, [(away, 5)], L).corners).all()
+
+
+@pytest.mark.parametrize("fov, distance", [(0.5, 1.2081), (0.5, 1.2), (1.2, 0.7)])
+def test_exactly_fronto_parallel_marker_has_a_finite_pose(fov, distance):
+    """IPPE_SQUARE returns NaN (or a pose tilted by degrees) for a perfectly square view
+    on the optical axis (exact synthetic corners); the pose must still be finite and right."""
+    from mmexec.skills.perception.markers import marker_pose_candidates
+
+    Ks = CameraIntrinsics.from_fov(320, 240, fov)
+    h = 0.05 * Ks.fx / distance
+    c = np.array([[Ks.cx - h, Ks.cy - h], [Ks.cx + h, Ks.cy - h], [Ks.cx + h, Ks.cy + h], [Ks.cx - h, Ks.cy + h]],
+                 np.float32)
+    T, err = marker_pose_candidates(c, Ks, 0.10)[0]
+    assert np.isfinite(T).all() and err < 0.01
+    assert T[:3, 3] == pytest.approx([0.0, 0.0, distance], abs=1e-3)
+    assert math.degrees(rotation_angle(T[:3, :3], np.diag([1.0, -1.0, -1.0]))) < 0.5
