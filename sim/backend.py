@@ -26,7 +26,7 @@ from typing import Any, Literal
 import numpy as np
 import pybullet as p
 
-from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, did_you_mean
+from mmexec.config.yamlload import Mark, Problems, YDict, bind, did_you_mean
 from mmexec.drivers.interfaces import CameraIntrinsics, CapabilityError, Pose2D, Robot
 from mmexec.sim.capabilities import (
     CameraNoise,
@@ -43,7 +43,14 @@ from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultConfig, FaultInjector, blocking_obstacles
 from mmexec.sim.models import MODEL_INFO, urdf_path
 from mmexec.sim.recording import Recorder
-from mmexec.sim.scene import GROUP_ARM, GROUP_BODY, GROUP_ITEM, GROUP_QUERY, GROUP_STATIC, spawn_world
+from mmexec.sim.scene import (
+    GROUP_ARM,
+    GROUP_BODY,
+    GROUP_ITEM,
+    GROUP_QUERY,
+    GROUP_STATIC,
+    spawn_world,
+)
 from mmexec.sim.world import World, load_world
 
 __all__ = ["CameraSection", "LidarSection", "SimError", "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]

@@ -43,8 +43,8 @@ class ClearanceMap:
         r = world.spec.room
         t = r.wall_thickness + 0.05
         ox, oy = -t, -t
-        w = int(math.ceil((r.size[0] + 2 * t) / resolution))
-        h = int(math.ceil((r.size[1] + 2 * t) / resolution))
+        w = math.ceil((r.size[0] + 2 * t) / resolution)
+        h = math.ceil((r.size[1] + 2 * t) / resolution)
         xs = ox + (np.arange(w) + 0.5) * resolution
         ys = oy + (np.arange(h) + 0.5) * resolution
         X, Y = np.meshgrid(xs, ys)

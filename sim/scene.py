@@ -26,8 +26,8 @@ __all__ = [
     "GROUP_QUERY",
     "GROUP_STATIC",
     "SceneHandles",
-    "spawn_world",
     "quat_of",
+    "spawn_world",
     "yaw_of",
 ]
 
