@@ -13,7 +13,9 @@ Each device package provides ``mmexec.drivers.<device>.bringup`` with
 and ``run_fake(args) -> int``; this module only dispatches to them, importing the
 one it needs lazily so a missing driver is a one-line error, not a traceback.
 Exit status: 0 when the device answers, non-zero otherwise with one line on stderr.
-Also runnable as ``python -m mmexec.drivers.hwcli``.
+Driver log records are held back below CRITICAL while a command runs (they would repeat
+that line); set ``MMEXEC_DEBUG=1`` to see them. Also runnable as
+``python -m mmexec.drivers.hwcli``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 from types import ModuleType
 
@@ -99,6 +102,12 @@ def main(argv: list[str] | None = None) -> int:
         ns = parser.parse_args(args[2:])
     except SystemExit as e:  # argparse printed its one-line error (or --help)
         return int(e.code or 0)
+    # The contract is one line per outcome: driver log records (a refusal logged by an I/O
+    # thread and then raised to the caller) would repeat it. MMEXEC_DEBUG shows them.
+    drivers_log = logging.getLogger("mmexec.drivers")
+    level = drivers_log.level
+    if not os.environ.get("MMEXEC_DEBUG"):
+        drivers_log.setLevel(logging.CRITICAL)
     try:
         return int(runner(ns))
     except KeyboardInterrupt:
@@ -108,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
         log.debug("mmexec hw %s %s failed", action, device, exc_info=True)
         print(f"mmexec hw {action} {device}: {type(e).__name__}: {e}", file=sys.stderr)
         return 1
+    finally:
+        drivers_log.setLevel(level)
 
 
 if __name__ == "__main__":

@@ -485,7 +485,8 @@ class KobukiDevice:
                 self._firmware = fb.firmware
                 if fb.firmware.major != SUPPORTED_FIRMWARE_MAJOR:
                     self._firmware_bad = True
-                    log.error("%s", KobukiFirmwareError(self.port, fb.firmware))
+                    # connect() raises it to the caller: logging it too would say it twice
+                    log.debug("%s", KobukiFirmwareError(self.port, fb.firmware))
             if fb.hardware is not None:
                 self._hardware = fb.hardware
             if fb.unique_id is not None:
