@@ -136,11 +136,24 @@ def run_skill(ctx: SkillContext, name: str, params: dict[str, Any] | None = None
     while run.status is SkillStatus.RUNNING:
         ctx.robot.spin(period)
         run.tick()
+        wait_for_planner(ctx)
         if on_tick is not None:
             on_tick()
         ticks += 1
         assert ticks < max_ticks, f"{name} still running after {ticks} ticks"
     return run
+
+
+def wait_for_planner(ctx: SkillContext) -> None:
+    """Block until the arm workspace's planning thread has finished the jobs handed to it
+    so far (a no-op queued behind them on its single worker), so a test ticks the skill
+    deterministically instead of racing the planner with thousands of empty ticks."""
+    from mmexec.skills.fetch.common import WORLD_ARM
+
+    ws = ctx.world.get(WORLD_ARM)
+    executor = getattr(ws, "executor", None)
+    if executor is not None:
+        executor.submit(lambda: None).result(timeout=60.0)
 
 
 def events_of(ctx: SkillContext, event: str) -> list[dict[str, Any]]:

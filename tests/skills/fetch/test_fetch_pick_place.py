@@ -1,0 +1,113 @@
+"""pick and place logic on the mock backend, no physics: the planning-scene sequence
+(add on perception, attach on grasp, detach + remove on place), the held-item world-model
+key, arm states, and failures from a scripted gripper or arm. Motions are planned for
+real (OMPL against the WX250s planning model) and followed by the mock arm."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from fetchkit import events_of, marker_pose, run_skill
+
+from mmexec.drivers.interfaces import GraspState, Pose2D
+from mmexec.drivers.mock.robot import MockArm, MockGripper
+from mmexec.skills.base import FailureKind, SkillStatus
+from mmexec.skills.fetch.common import WORLD_ARM, WORLD_HELD, WORLD_MARKERS, MarkerEstimate
+from mmexec.skills.manipulation import wx250s
+
+
+@pytest.fixture
+def arm_robot(fetch_robot):
+    """The fetch mock robot with a WX250s-jointed mock arm (at the profile's tuck pose)
+    and a gripper whose first close meets a 50 mm item."""
+    kin = wx250s(locobot=True)
+    fetch_robot.arm = MockArm(fetch_robot.clock, limits=kin.limits,
+                              start=fetch_robot.profile["named_poses"]["tuck"])
+    fetch_robot.gripper = MockGripper(fetch_robot.clock, grasps=[True], object_width=0.05)
+    return fetch_robot
+
+
+def _perceive(ctx, robot, marker: int = 7) -> None:
+    """An estimate of ``marker`` 0.40 m ahead of the arm base, 0.20 m up, facing it."""
+    p = robot.base.pose
+    T = marker_pose(p.x + 0.40, p.y, 0.20, math.pi)
+    ctx.world.setdefault(WORLD_MARKERS, {})[marker] = MarkerEstimate(marker, T, 3, 0.0, 0.5)
+
+
+def _scene_ops(ctx) -> list[str]:
+    return [e["op"] for e in events_of(ctx, "scene_update")]
+
+
+def test_pick_then_place_runs_the_seed_scene_sequence(arm_robot, fetch_ctx):
+    _perceive(fetch_ctx, arm_robot)
+    start = arm_robot.base.pose
+    run = run_skill(fetch_ctx, "pick", {"marker": 7})
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    assert run.outputs == {"item": "item_7"}
+    assert _scene_ops(fetch_ctx) == ["add", "attach"]
+    ws = fetch_ctx.world[WORLD_ARM]
+    assert set(ws.scene.items) == {"item_7"} and ws.scene.items["item_7"].attached
+    assert fetch_ctx.world[WORLD_HELD] == "item_7"
+    gs = arm_robot.gripper.state()
+    assert gs.grasp is GraspState.CONTACT_CLOSING and gs.width == pytest.approx(0.05)
+    # backed off the shelf (profile back_off 0.1 m) and ended in the carry pose
+    assert start.distance_to(arm_robot.base.pose) == pytest.approx(0.1, abs=0.01)
+    assert list(arm_robot.arm.state().positions) == pytest.approx(arm_robot.profile["named_poses"]["carry"], abs=0.02)
+    assert [e["status"] for e in events_of(fetch_ctx, "arm_status")] == ["running", "success", "idle"]
+    planned = [e["what"] for e in events_of(fetch_ctx, "arm_plan")]
+    assert planned[:3] == ["pre-grasp", "grasp approach", "retract"] and planned[-1] == "arm to carry"
+
+    # at the depot: place detaches and removes the item, opens, closes, stows
+    arm_robot.base.pose = Pose2D(1.0, 4.0, math.pi / 2)
+    fetch_ctx.events.clear()
+    run = run_skill(fetch_ctx, "place")
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    assert run.outputs == {"item": "item_7"}
+    assert _scene_ops(fetch_ctx) == ["detach_remove"]
+    assert ws.scene.items == {} and WORLD_HELD not in fetch_ctx.world
+    assert list(arm_robot.arm.state().positions) == pytest.approx(arm_robot.profile["named_poses"]["tuck"], abs=0.02)
+    assert [e["what"] for e in events_of(fetch_ctx, "arm_plan")][:2] == ["place pose", "place retract"]
+
+
+def test_pick_closing_on_nothing_fails_postcondition_and_clears_the_scene(arm_robot, fetch_ctx):
+    arm_robot.gripper.grasps = [False]
+    _perceive(fetch_ctx, arm_robot)
+    run = run_skill(fetch_ctx, "pick", {"marker": 7})
+    assert run.status is SkillStatus.FAILURE
+    assert run.failure.kind is FailureKind.POSTCONDITION
+    assert run.failure.reason.startswith("nothing held after closing on marker 7")
+    assert _scene_ops(fetch_ctx) == ["add"]  # never attached
+    assert fetch_ctx.world[WORLD_ARM].scene.items == {}
+    assert WORLD_HELD not in fetch_ctx.world
+    assert arm_robot.gripper.state().width == pytest.approx(arm_robot.gripper.max_width)  # released
+    arm = events_of(fetch_ctx, "arm_status")
+    assert [e["status"] for e in arm] == ["running", "fail", "idle"]
+    assert arm[1]["kind"] == "postcondition"
+
+
+def test_pick_arm_failure_is_execution_and_leaves_nothing_attached(arm_robot, fetch_ctx):
+    arm_robot.arm.fail_moves = {1}
+    _perceive(fetch_ctx, arm_robot)
+    run = run_skill(fetch_ctx, "pick", {"marker": 7})
+    assert run.status is SkillStatus.FAILURE
+    assert run.failure.kind is FailureKind.EXECUTION
+    assert run.failure.reason.startswith("pre-grasp: ") and "scripted" in run.failure.reason
+    assert fetch_ctx.world[WORLD_ARM].scene.items == {}
+    assert arm_robot.gripper.closes == 0
+
+
+def test_pick_without_an_estimate_and_place_without_an_item(arm_robot, fetch_ctx):
+    run = run_skill(fetch_ctx, "pick", {"marker": 7})
+    assert run.failure.kind is FailureKind.PRECONDITION and "detect it first" in run.failure.reason
+    run = run_skill(fetch_ctx, "place")
+    assert run.failure.kind is FailureKind.PRECONDITION and run.failure.reason.startswith("place: nothing held")
+
+
+def test_pick_out_of_reach_is_a_planning_failure(arm_robot, fetch_ctx):
+    p = arm_robot.base.pose
+    fetch_ctx.world[WORLD_MARKERS] = {7: MarkerEstimate(7, marker_pose(p.x + 1.5, p.y, 0.15, math.pi), 3, 0.0, 1.5)}
+    run = run_skill(fetch_ctx, "pick", {"marker": 7})
+    assert run.status is SkillStatus.FAILURE
+    assert run.failure.kind is FailureKind.PLANNING and run.failure.reason.startswith("pre-grasp: ")
+    assert arm_robot.arm.moves == 0
