@@ -441,6 +441,23 @@ def _tail(path: str, lines: int = 3) -> str:
     return " | ".join(kept[-lines:])
 
 
+#: Wall seconds an interrupted trial gets to stop before it is killed.
+STOP_GRACE = 10.0
+
+
+def _stop_trial(proc: subprocess.Popen[bytes]) -> None:
+    """SIGINT the trial's process group, wait up to :data:`STOP_GRACE`, then SIGKILL it."""
+    try:
+        os.killpg(proc.pid, signal.SIGINT)
+        proc.wait(timeout=STOP_GRACE)
+    except subprocess.TimeoutExpired:
+        log.warning("trial process %d still running %g s after SIGINT; killing it", proc.pid, STOP_GRACE)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+    except ProcessLookupError:
+        log.debug("trial process %d already gone", proc.pid)
+
+
 def run_trial(spec: TrialSpec) -> TrialResult:
     """Run one trial as a ``mmexec run`` subprocess (in a pool worker or a Ray task) and
     parse its event log. Never raises for what the trial does: a crash, a kill or a
@@ -460,6 +477,12 @@ def run_trial(spec: TrialSpec) -> TrialResult:
             proc.wait()
             rc = proc.returncode
             note = f"killed after {spec.wall_limit:g} s of wall time (--trial-timeout)"
+        except BaseException:
+            # Ctrl-C (or a cancelled Ray task): the trial runs in its own session, so pass
+            # the interrupt on; `mmexec run` halts its tree, leaves the robot safe and
+            # writes run_end (interrupted). Past the grace period it is killed.
+            _stop_trial(proc)
+            raise
     wall = time.monotonic() - t0
     if rc == 2 and not note:
         note = f"bad input: {_tail(spec.out_path, 5)}"
@@ -530,7 +553,7 @@ class Campaign:
         """Check every input, write DIR/config.yaml and DIR/campaign.json, build the
         trial specs. Raises InputError on bad input or a DIR holding other settings."""
         from mmexec.executive.config import load_config
-        from mmexec.executive.runner import Request, RunOptions, Runner
+        from mmexec.executive.runner import Request, Runner, RunOptions
 
         o = self.options
         if o.trials < 1:
@@ -791,24 +814,38 @@ def _run_ray(specs: Sequence[TrialSpec], workers: int, address: str | None) -> I
         task = ray.remote(num_cpus=1, max_retries=0)(run_trial)
         refs = {task.remote(s): s for s in specs}
         waiting = list(refs)
-        while waiting:
-            ready, waiting = ray.wait(waiting, num_returns=1)
-            for ref in ready:
-                spec = refs[ref]
-                try:
-                    result = ray.get(ref)
-                except ray.exceptions.RayError as e:
-                    msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-                    result = parse_trial_log(spec, exit_code=None, wall=float("nan"),
-                                             note=f"Ray task failed: {type(e).__name__}: {msg}")
-                if result.exit_code == 2:
-                    for r in waiting:
-                        ray.cancel(r, force=True)
-                    raise _input_error_from_trial(result)
-                yield result
+        try:
+            yield from _ray_results(ray, refs, waiting)
+        except KeyboardInterrupt:
+            # cancel raises KeyboardInterrupt inside running tasks: they pass it to their trial
+            for ref in waiting:
+                ray.cancel(ref)
+            ray.wait(waiting, num_returns=len(waiting), timeout=STOP_GRACE + 5.0)
+            raise
     finally:
         if started:
             ray.shutdown()
+
+
+def _ray_results(ray: Any, refs: Mapping[Any, TrialSpec], waiting: list[Any]) -> Iterable[TrialResult]:
+    """Yield results as Ray tasks finish; ``waiting`` (the refs not finished) is updated
+    in place so the caller can cancel what is left."""
+    while waiting:
+        ready, rest = ray.wait(waiting, num_returns=1)
+        waiting[:] = rest
+        for ref in ready:
+            spec = refs[ref]
+            try:
+                result = ray.get(ref)
+            except ray.exceptions.RayError as e:
+                msg = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+                result = parse_trial_log(spec, exit_code=None, wall=float("nan"),
+                                         note=f"Ray task failed: {type(e).__name__}: {msg}")
+            if result.exit_code == 2:
+                for r in waiting:
+                    ray.cancel(r, force=True)
+                raise _input_error_from_trial(result)
+            yield result
 
 
 class _CampaignProgress:
@@ -850,7 +887,7 @@ class _CampaignProgress:
 
 
 def _hms(seconds: float) -> str:
-    s = int(round(seconds))
+    s = round(seconds)
     h, rem = divmod(s, 3600)
     m, s = divmod(rem, 60)
     return f"{h}h{m:02d}m" if h else (f"{m}m{s:02d}s" if m else f"{s}s")

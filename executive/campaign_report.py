@@ -200,19 +200,19 @@ def _report(identity: Mapping[str, Any], summary: Mapping[str, Any], results: Se
     lines = [
         f"# Campaign: {identity.get('mission')} on {identity.get('config')}",
         "",
-        f"- trials: {summary['trials']} (seed {identity.get('seed')}; trial i runs with seed "
-        "`trial_seed(S, i)`, see docs/campaigns.md)",
-        f"- fault profile: `{identity.get('faults')}` ({identity.get('faults_description', '')}); "
+        (f"- trials: {summary['trials']} (seed {identity.get('seed')}; trial i runs with seed "
+        "`trial_seed(S, i)`, see docs/campaigns.md)"),
+        (f"- fault profile: `{identity.get('faults')}` ({identity.get('faults_description', '')}); "
         f"recovery {'on' if identity.get('recovery', True) else 'OFF (ablation)'}; world randomisation "
-        f"{'on' if identity.get('randomize') else 'off' if identity.get('randomize') is False else 'n/a'}",
+        f"{'on' if identity.get('randomize') else 'off' if identity.get('randomize') is False else 'n/a'}"),
         f"- requests: {identity.get('requests_description', '')}",
         "",
         "## Results",
         "",
         "| measure | value |",
         "|---|---|",
-        f"| success rate | **{summary['success_rate']:.3f}** ({summary['successes']}/{summary['trials']}), "
-        f"95% Wilson CI [{lo:.3f}, {hi:.3f}] |",
+        (f"| success rate | **{summary['success_rate']:.3f}** ({summary['successes']}/{summary['trials']}), "
+        f"95% Wilson CI [{lo:.3f}, {hi:.3f}] |"),
         f"| failures / errors (crashed trials) | {summary['failures']} / {summary['errors']} |",
         f"| clock time per request, mean / median | {_fmt(c['mean'])} / {_fmt(c['median'])} ({c['n']} requests) |",
         f"| clock time per successful request, mean / median | {_fmt(cs['mean'])} / {_fmt(cs['median'])} |",

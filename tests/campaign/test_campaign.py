@@ -62,8 +62,8 @@ def skills_on_path() -> Iterator[None]:
 
 
 def coin_options(out: Path, **kw: object) -> CampaignOptions:
-    base: dict[str, object] = dict(mission=COIN, config=COIN_CFG, trials=COIN_TRIALS, out=out, seed=COIN_SEED,
-                                   workers=2, requests=RequestPlan(draws={"item": ITEMS}), progress=False)
+    base: dict[str, object] = {"mission": COIN, "config": COIN_CFG, "trials": COIN_TRIALS, "out": out, "seed": COIN_SEED,
+                                   "workers": 2, "requests": RequestPlan(draws={"item": ITEMS}), "progress": False}
     base.update(kw)
     return CampaignOptions(**base)  # type: ignore[arg-type]
 
@@ -298,8 +298,8 @@ def test_cli_bad_input_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture
 
 def test_sim_campaign_fault_profile_and_recovery_ablation(tmp_path: Path) -> None:
     plan = RequestPlan(draws={"item": tuple(range(1, 7))})
-    kw = dict(mission=SIM_ARM, config=SIM_CFG, trials=2, seed=3, workers=2, faults="arm_fail_first",
-              requests=plan, progress=False)
+    kw = {"mission": SIM_ARM, "config": SIM_CFG, "trials": 2, "seed": 3, "workers": 2, "faults": "arm_fail_first",
+              "requests": plan, "progress": False}
     with open(os.devnull, "w") as null:
         _, with_rec = run_campaign(CampaignOptions(out=tmp_path / "rec", **kw), out=null)  # type: ignore[arg-type]
         _, without = run_campaign(CampaignOptions(out=tmp_path / "norec", recovery=False,  # type: ignore[arg-type]
@@ -323,8 +323,40 @@ def test_sim_campaign_fault_profile_and_recovery_ablation(tmp_path: Path) -> Non
 
 
 def test_ray_campaign_matches_local_outcomes(local_run: tuple[Path, list[TrialResult]], tmp_path: Path) -> None:
-    out, local = local_run
+    _out, local = local_run
     with open(os.devnull, "w") as null:
         _, remote = run_campaign(coin_options(tmp_path / "ray", ray=""), out=null)
     assert [(r.index, r.seed, r.outcome, r.reason, r.clock, r.recoveries) for r in remote] == \
         [(r.index, r.seed, r.outcome, r.reason, r.clock, r.recoveries) for r in local]
+
+
+def test_trial_timeout_kills_a_hung_trial(tmp_path: Path, skills_on_path: None) -> None:
+    opts = coin_options(tmp_path / "hang", trials=1, workers=1, trial_timeout=4.0,
+                        requests=RequestPlan(fixed=({"item": "7"},)))
+    with open(os.devnull, "w") as null:
+        _, (r,) = run_campaign(opts, out=null)
+    assert r.outcome == "error" and r.exit_code == -9
+    assert r.reason.startswith("killed after 4 s of wall time (--trial-timeout)")
+    assert 4.0 <= r.wall < 30.0
+
+
+def test_progress_line_on_a_terminal_and_plain_lines_otherwise() -> None:
+    import io
+
+    from mmexec.executive.campaign import _CampaignProgress
+
+    def result(i: int, outcome: str) -> TrialResult:
+        return TrialResult(i, 10 + i, outcome, 1.5, 0.5, 0, "" if outcome == "success" else "boom")
+
+    tty = io.StringIO()
+    p = _CampaignProgress(tty, total=4, done=[result(0, "success")], enabled=True)
+    p.add(result(1, "failure"))
+    assert tty.getvalue().startswith("\r[2/4] 1 ok (50.0%), elapsed ") and "ETA " in tty.getvalue()
+    p.finish()
+    assert tty.getvalue().endswith("\r\x1b[K")
+    plain = io.StringIO()
+    p = _CampaignProgress(plain, total=2, done=[], enabled=False)
+    p.add(result(0, "error"))
+    line = plain.getvalue()
+    assert line.startswith("trial 0000 seed 10: error, 1.5 s clock, 0.5 s wall: boom  [1/2] 0 ok (0.0%), 1 errors")
+    assert "\r" not in line and line.endswith("\n")
