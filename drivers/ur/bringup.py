@@ -183,20 +183,20 @@ def run_fake(args: argparse.Namespace) -> int:
     from mmexec.drivers.ur.rtde_stub import RTDEStub, StubError
 
     stub = RTDEStub(args.host, args.port)
-    try:
-        stub.start()
-    except StubError as e:
-        print(f"ur fake: {e}", file=sys.stderr)
-        return 1
-    print(f"{stub.host}:{stub.port}", flush=True)
     stop = threading.Event()
-    previous = signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    # handlers first: a Ctrl-C right after the port is printed still stops the stub process
+    previous = {s: signal.signal(s, lambda *_: stop.set()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
+        try:
+            stub.start()
+        except StubError as e:
+            print(f"ur fake: {e}", file=sys.stderr)
+            return 1
+        print(f"{stub.host}:{stub.port}", flush=True)
         while not stop.is_set() and stub.running():
             stop.wait(0.5)
-    except KeyboardInterrupt:
-        pass
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
         stub.stop()
     return 0

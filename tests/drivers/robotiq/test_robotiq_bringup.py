@@ -106,7 +106,11 @@ def test_fake_process_prints_port_and_stops_on_sigterm() -> None:
     try:
         assert proc.stdout is not None
         port = proc.stdout.readline().strip()
-        assert port.startswith("/dev/pts/") and os.path.exists(port)
+        if not port.startswith("/dev/pts/"):  # say why the fake ended instead of printing it
+            proc.kill()
+            _, err = proc.communicate(timeout=10)
+            pytest.fail(f"fake printed {port!r}, exit {proc.returncode}, stderr: {err}")
+        assert os.path.exists(port)
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=5) == 0
     finally:
