@@ -18,11 +18,14 @@ from __future__ import annotations
 import logging
 import math
 import weakref
-from collections.abc import Generator, Sequence
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Generator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import wait as futures_wait
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
 
 import numpy as np
+
 from mmexec.drivers.interfaces import GraspState
 from mmexec.skills.base import (
     FailureKind,
@@ -44,6 +47,7 @@ from mmexec.skills.fetch.common import (
     markers,
 )
 from mmexec.skills.manipulation import (
+    CANCELLED,
     ArmKinematics,
     ArmModel,
     ArmPlanner,
@@ -57,23 +61,39 @@ from mmexec.skills.manipulation import (
     wx250s,
 )
 
-__all__ = ["ArmWorkspace", "arm_pose", "close_workspace", "move_named", "pick", "place", "workspace"]
+__all__ = ["ArmWorkspace", "arm_pose", "close_workspace", "move_named", "off_tick", "pick", "place", "workspace"]
 
 log = logging.getLogger(__name__)
 
 Gen = Generator[None, None, dict[str, Any]]
 
 
+R = TypeVar("R")
+
+
 @dataclass
 class ArmWorkspace:
     """Kinematics, planning scene and planner of the robot's arm (one per run, in the
-    world model under ``fetch.arm``). The scene's pybullet client is closed by
-    :func:`close_workspace` or when the workspace is garbage-collected."""
+    world model under ``fetch.arm``), and the one worker thread that plans.
+
+    Ticks never wait for planning (15-300 ms, up to ``time_limit`` x ``attempts``): skills
+    hand every planning-scene update and plan to :attr:`executor` (:func:`off_tick`) and
+    yield until it is done. While a job runs, only the worker touches the scene's
+    pybullet client. :meth:`close` (or :func:`close_workspace`, or garbage collection)
+    stops a running plan, joins the worker and closes the scene's client."""
 
     settings: ArmSettings
     kin: ArmKinematics
     scene: PlanningScene
     planner: ArmPlanner
+    executor: ThreadPoolExecutor = field(
+        default_factory=lambda: ThreadPoolExecutor(max_workers=1, thread_name_prefix="arm-planner"))
+
+    def close(self) -> None:
+        """Stop a running plan, wait for the worker to finish it, free the scene."""
+        self.planner.stop.set()
+        self.executor.shutdown(wait=True)
+        self.scene.close()
 
     def config(self, algorithm: str | None = None, time_limit: float | None = None,
                attempts: int | None = None) -> PlannerConfig:
@@ -94,7 +114,7 @@ def workspace(ctx: SkillContext) -> ArmWorkspace:
     if isinstance(ws, ArmWorkspace) and ws.settings == settings:
         return ws
     if isinstance(ws, ArmWorkspace):
-        ws.scene.close()
+        ws.close()
     kin = wx250s(locobot=True) if settings.model == "locobot_wx250s" else ur5e(tcp_offset=settings.tcp_offset)
     arm = ctx.robot.arm
     if arm is not None and tuple(arm.joint_names) != tuple(kin.joint_names):
@@ -102,19 +122,58 @@ def workspace(ctx: SkillContext) -> ArmWorkspace:
                            f"profile.fetch.arm.model {settings.model!r} plans joints {list(kin.joint_names)}, "
                            f"but the arm has {list(arm.joint_names)}")
     scene = PlanningScene(ArmModel.from_sim_model(settings.model))
-    weakref.finalize(scene, PlanningScene.close, scene)
-    ws = ArmWorkspace(settings, kin, scene, ArmPlanner(scene, kin, PlannerConfig(
+    planner = ArmPlanner(scene, kin, PlannerConfig(
         algorithm=settings.algorithm, time_limit=settings.time_limit, attempts=settings.attempts,
-        velocity_scale=settings.velocity_scale, acceleration_scale=settings.acceleration_scale)))
+        velocity_scale=settings.velocity_scale, acceleration_scale=settings.acceleration_scale))
+    ws = ArmWorkspace(settings, kin, scene, planner)
+    weakref.finalize(ws, _finalize, planner, ws.executor, scene)
     ctx.world[WORLD_ARM] = ws
     return ws
 
 
+def _finalize(planner: ArmPlanner, executor: ThreadPoolExecutor, scene: PlanningScene) -> None:
+    planner.stop.set()
+    executor.shutdown(wait=True)
+    scene.close()
+
+
 def close_workspace(world: dict[str, Any]) -> None:
-    """Free the planning scene of a run (tests and embedding code call this at the end)."""
+    """Free the planning worker and scene of a run (tests and embedding code call this at the end)."""
     ws = world.pop(WORLD_ARM, None)
     if isinstance(ws, ArmWorkspace):
-        ws.scene.close()
+        ws.close()
+
+
+def off_tick(ctx: SkillContext, ws: ArmWorkspace, job: Callable[[], R]) -> Generator[None, None, R]:
+    """Run ``job`` (planning-scene updates and planning) on the workspace's worker thread
+    and yield once per tick until it returns, each tick waiting at most
+    ``profile.fetch.arm.plan_slice`` wall seconds for it; returns its result (its
+    exception is re-raised here). Cancelled: sets ``planner.stop`` so OMPL, IK and Cartesian loops end
+    early, keeps yielding until the job has returned (the scene is never left to a
+    running job), then re-raises."""
+    ws.planner.stop.clear()
+    fut = ws.executor.submit(job)
+    budget = ws.settings.plan_slice
+    try:
+        while True:
+            # give the worker a bounded slice of this tick (well inside a tick period):
+            # on the robot the runner would idle it away anyway; in sim, whose clock runs
+            # many times faster than the wall clock, it keeps a 100 ms plan from costing
+            # seconds of clock time. The tick never waits longer than the slice.
+            futures_wait((fut,), timeout=budget)
+            if fut.done():
+                break
+            yield
+    except SkillCancelled:
+        ws.planner.stop.set()
+        while not fut.done():
+            try:
+                yield
+            except SkillCancelled:
+                continue
+        ws.planner.stop.clear()
+        raise
+    return fut.result()
 
 
 # --------------------------------------------------------------------------- helpers
@@ -191,11 +250,20 @@ def move_named(ctx: SkillContext, name: str, *, cfg: PlannerConfig | None = None
     When the arm starts in collision with a scene item (it is touching it), the plan is
     retried without the free items."""
     ws = workspace(ctx)
-    ws.scene.set_static_boxes(ctx.robot.scene, _T_armbase_map(ctx))
     q0, q1 = _q(ctx), _named_q(ctx, name)
     if max(abs(a - b) for a, b in zip(q0, q1)) < 1e-3:
         return
-    cfg = cfg or ws.config()
+    boxes, T_am = ctx.robot.scene, _T_armbase_map(ctx)
+    plan_cfg = cfg or ws.config()
+    res = yield from off_tick(ctx, ws, lambda: _plan_named(ws, boxes, T_am, q0, q1, name, plan_cfg))
+    _planned(ctx, res, f"arm to {name}")
+    yield from _execute(ctx, res, f"arm to {name}")
+
+
+def _plan_named(ws: ArmWorkspace, boxes: Sequence[Any], T_am: np.ndarray, q0: list[float], q1: list[float],
+                name: str, cfg: PlannerConfig) -> PlanResult:
+    """(worker thread) The plan of :func:`move_named`."""
+    ws.scene.set_static_boxes(boxes, T_am)
     res = ws.planner.plan(q0, q1, cfg)
     if not res.success and res.reason.startswith("start in collision"):
         for it in [n for n, item in ws.scene.items.items() if not item.attached]:
@@ -212,8 +280,7 @@ def move_named(ctx: SkillContext, name: str, *, cfg: PlannerConfig | None = None
                                     velocity_scale=cfg.velocity_scale, acceleration_scale=cfg.acceleration_scale,
                                     sample_period=cfg.sample_period)
             res = PlanResult(True, "", 0.0, [tuple(q0), tuple(q1)], traj, 0)
-    _planned(ctx, res, f"arm to {name}")
-    yield from _execute(ctx, res, f"arm to {name}")
+    return res
 
 
 def _item_pose_and_size(prof: FetchProfile, T_marker: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:
@@ -313,41 +380,57 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     ws = workspace(ctx)
     cfg = ws.config(algorithm, time_limit, attempts)
     T_am = _T_armbase_map(ctx)
-    ws.scene.set_static_boxes(ctx.robot.scene, T_am)
     T_am_marker = T_am @ est.T_map_marker
     name = f"item_{marker}"
-    for old in [n for n in ws.scene.items]:
-        ws.scene.remove_item(old)
     T_item, size = _item_pose_and_size(prof, T_am_marker)
-    ws.scene.add_item(name, size, T_item)
-    ctx.emit("scene_update", op="add", item=name, node=ctx.node_path)
     poses = grasp_poses(T_am_marker, ws.kin.approach_axis, pre_grasp=prof.pre_grasp, grasp_depth=prof.grasp_depth,
                         retract=prof.retract)
-    q = _q(ctx)
-    pre = _planned(ctx, ws.planner.plan_to_pose(q, poses.pre_grasp, ik_seeds=_ik_seeds(ctx, ws, poses.pre_grasp),
-                                                config=cfg), "pre-grasp")
-    yield from _gripper(ctx, None, prof.grasp_force)
-    yield from _execute(ctx, pre, "pre-grasp")
-    # the fingers must touch the item: take it out of the scene for the straight approach
-    ws.scene.remove_item(name)
-    grasp = _planned(ctx, ws.planner.cartesian_path(_q(ctx), poses.grasp, config=cfg), "grasp approach")
-    yield from _execute(ctx, grasp, "grasp approach")
+    q, seeds, boxes = _q(ctx), _ik_seeds(ctx, ws, poses.pre_grasp), ctx.robot.scene
+
+    def plan_pre_grasp() -> PlanResult:
+        ws.scene.set_static_boxes(boxes, T_am)
+        for old in list(ws.scene.items):
+            ws.scene.remove_item(old)
+        ws.scene.add_item(name, size, T_item)
+        return ws.planner.plan_to_pose(q, poses.pre_grasp, ik_seeds=seeds, config=cfg)
+
     g = ctx.robot.gripper
     assert g is not None
+    opening = g.open(force=prof.grasp_force)  # opens while the plan is computed
+    res = yield from off_tick(ctx, ws, plan_pre_grasp)
+    ctx.emit("scene_update", op="add", item=name, node=ctx.node_path)
+    pre = _planned(ctx, res, "pre-grasp")
+    yield from wait_goal(ctx, opening, timeout=10.0)
+    yield from _execute(ctx, pre, "pre-grasp")
+    q = _q(ctx)
+
+    def plan_approach() -> PlanResult:
+        # the fingers must touch the item: take it out of the scene for the straight approach
+        ws.scene.remove_item(name)
+        return ws.planner.cartesian_path(q, poses.grasp, config=cfg)
+
+    grasp = _planned(ctx, (yield from off_tick(ctx, ws, plan_approach)), "grasp approach")
+    yield from _execute(ctx, grasp, "grasp approach")
     yield from wait_goal(ctx, g.close(force=prof.grasp_force), timeout=10.0)
     held, why = _holding(ctx, prof.min_held_width)
     if not held:
         yield from _gripper(ctx, None, prof.grasp_force)
         raise SkillFailure(FailureKind.POSTCONDITION, f"nothing held after closing on marker {marker} ({why})")
     q_grasp = _q(ctx)
-    ws.scene.add_item(name, size, T_item)
-    ws.scene.attach_item(name, q_grasp)
+
+    def plan_retract() -> PlanResult:
+        ws.scene.add_item(name, size, T_item)
+        ws.scene.attach_item(name, q_grasp)
+        line = ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg)
+        if not line.success and line.reason != CANCELLED:
+            # the straight line folds the arm into itself: plan a way instead
+            log.info("retract: %s; planning to the retract pose", line.reason)
+            line = ws.planner.plan_to_pose(q_grasp, poses.retract, ik_seeds=[q_grasp], config=cfg)
+        return line
+
     ctx.world[WORLD_HELD] = name
+    line = yield from off_tick(ctx, ws, plan_retract)
     ctx.emit("scene_update", op="attach", item=name, node=ctx.node_path)
-    line = ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg)
-    if not line.success:  # the straight line folds the arm into itself: plan a way instead
-        log.info("retract: %s; planning to the retract pose", line.reason)
-        line = ws.planner.plan_to_pose(q_grasp, poses.retract, ik_seeds=[q_grasp], config=cfg)
     out = _planned(ctx, line, "retract")
     yield from _execute(ctx, out, "retract")
     if ctx.robot.base is not None:
@@ -395,23 +478,32 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     ws = workspace(ctx)
     cfg = ws.config(algorithm, time_limit, attempts)
     T_am = _T_armbase_map(ctx)
-    ws.scene.set_static_boxes(ctx.robot.scene, T_am)
     name = str(ctx.world.get(WORLD_HELD, "item"))
     base = ctx.robot.base
     bp = base.state().pose if base is not None else None
     T_map_place = _place_frame(prof.depot.place, (bp.x, bp.y) if bp is not None else (0.0, 0.0))
     poses = place_poses(T_am @ T_map_place, ws.kin.approach_axis, retract=prof.place_retract)
-    res = _planned(ctx, ws.planner.plan_to_pose(_q(ctx), poses.place, ik_seeds=_ik_seeds(ctx, ws, poses.place),
-                                                config=cfg), "place pose")
+    q, seeds, boxes = _q(ctx), _ik_seeds(ctx, ws, poses.place), ctx.robot.scene
+
+    def plan_place() -> PlanResult:
+        ws.scene.set_static_boxes(boxes, T_am)
+        return ws.planner.plan_to_pose(q, poses.place, ik_seeds=seeds, config=cfg)
+
+    res = _planned(ctx, (yield from off_tick(ctx, ws, plan_place)), "place pose")
     yield from _execute(ctx, res, "place pose")
     yield from _gripper(ctx, None, prof.grasp_force)
     q = _q(ctx)
-    if name in ws.scene.items:
-        ws.scene.detach_item(name, q)
-        ws.scene.remove_item(name)
-        ctx.emit("scene_update", op="detach_remove", item=name, node=ctx.node_path)
+
+    def plan_back() -> PlanResult:
+        if name in ws.scene.items:
+            ws.scene.detach_item(name, q)
+            ws.scene.remove_item(name)
+        return ws.planner.cartesian_path(q, poses.retract, config=cfg)
+
     ctx.world.pop(WORLD_HELD, None)
-    back = _planned(ctx, ws.planner.cartesian_path(q, poses.retract, config=cfg), "place retract")
+    back = yield from off_tick(ctx, ws, plan_back)
+    ctx.emit("scene_update", op="detach_remove", item=name, node=ctx.node_path)
+    back = _planned(ctx, back, "place retract")
     yield from _execute(ctx, back, "place retract")
     g = ctx.robot.gripper
     assert g is not None

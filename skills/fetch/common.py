@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+
 from mmexec.config.yamlload import InputError, Mark, Problems, bind, mark_of
 from mmexec.drivers.interfaces import Base, Pose2D
 from mmexec.skills.base import FailureKind, SkillCancelled, SkillContext, SkillFailure
@@ -99,7 +100,9 @@ class ArmSettings:
     (keys of the profile's ``named_poses``) used to ``stow`` the arm while driving,
     ``carry`` an item, ``look`` with an arm-mounted camera (None: camera not on the arm),
     and ``reach``: the posture that seeds IK for pick and place poses (its yaw joint
-    turned towards the target; None: the current posture only)."""
+    turned towards the target; None: the current posture only). Planning runs on a
+    worker thread; each tick waits at most ``plan_slice`` [wall s] for it (keep it well
+    below the tick period), then yields."""
 
     model: Literal["locobot_wx250s", "ur5e_robotiq"] = "locobot_wx250s"
     tcp_offset: float = 0.155
@@ -112,6 +115,7 @@ class ArmSettings:
     carry: str = "sleep"
     look: str | None = None
     reach: str | None = None
+    plan_slice: float = 0.015
 
     def validate(self) -> list[str]:
         out = []
@@ -119,6 +123,8 @@ class ArmSettings:
             out.append("time_limit must be > 0 s and attempts >= 1")
         if not (0 < self.velocity_scale <= 1 and 0 < self.acceleration_scale <= 1):
             out.append("velocity_scale and acceleration_scale must be in (0, 1]")
+        if not 0 <= self.plan_slice <= 0.1:
+            out.append(f"plan_slice: expected 0..0.1 s of a tick, got {self.plan_slice}")
         return out
 
 

@@ -14,6 +14,7 @@ from mmexec.skills.manipulation.grasp import (
 )
 from mmexec.skills.manipulation.kinematics import ArmKinematics, ur5e, wx250s
 from mmexec.skills.manipulation.planner import (
+    CANCELLED,
     ArmPlanner,
     PlannerConfig,
     PlanResult,
@@ -22,6 +23,7 @@ from mmexec.skills.manipulation.planner import (
 from mmexec.skills.manipulation.scene import ArmModel, PlanningScene
 
 __all__ = [
+    "CANCELLED",
     "ArmKinematics",
     "ArmModel",
     "ArmPlanner",

@@ -8,27 +8,35 @@ joint's velocity and acceleration limits: every segment between waypoints is a
 synchronised trapezoidal (or triangular) velocity profile starting and ending at rest,
 sampled densely so the Arm's linear interpolation follows it.
 
-Everything is synchronous and bounded by ``time_limit`` x ``attempts``: a skill calls it
-once between ticks (planning time is milliseconds for the scenes we use) or runs it in a
-worker; nothing here sleeps.
+Every call is synchronous and bounded by ``time_limit`` x ``attempts``; skills run it on
+a worker thread (a tick never waits for it). :attr:`ArmPlanner.stop` is a threading.Event
+another thread sets to make a running call return early with reason "cancelled": OMPL's
+termination condition polls it, and IK starts, attempts and Cartesian waypoints check it.
+Nothing here sleeps.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
+
 from mmexec.drivers.interfaces import JointLimit, JointTrajectory
 from mmexec.skills.manipulation.kinematics import ArmKinematics
 from mmexec.skills.manipulation.scene import PlanningScene
 
-__all__ = ["ArmPlanner", "PlanResult", "PlannerConfig", "time_parametrize"]
+__all__ = ["CANCELLED", "ArmPlanner", "PlanResult", "PlannerConfig", "time_parametrize"]
 
 log = logging.getLogger(__name__)
+
+#: ``PlanResult.reason`` of a call stopped through :attr:`ArmPlanner.stop`.
+CANCELLED = "cancelled"
 
 
 @dataclass(frozen=True)
@@ -138,7 +146,7 @@ def time_parametrize(
     times: list[float] = []
     points: list[tuple[float, ...]] = []
     t0 = 0.0
-    for a, b in zip(path, path[1:]):
+    for a, b in pairwise(path):
         qa, qb = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
         delta = qb - qa
         if not np.any(np.abs(delta) > 1e-12):
@@ -150,7 +158,7 @@ def time_parametrize(
             if d > 0:
                 T = max(T, 4.0 * d / (3.0 * v), math.sqrt(16.0 * d / (3.0 * acc)))
         T = max(T, _segment_time(delta, vmax, amax), 1e-3)
-        n = max(2, int(math.ceil(T / sample_period)))
+        n = max(2, math.ceil(T / sample_period))
         for k in range(1, n + 1):
             t = T * k / n
             s = _profile(t, T)
@@ -173,6 +181,9 @@ class ArmPlanner:
         self.scene = scene
         self.kin = kin
         self.config = config or PlannerConfig()
+        #: set (from any thread) to make the running plan call return "cancelled" early;
+        #: the caller clears it before the next call
+        self.stop = threading.Event()
         errs = self.config.validate()
         if errs:
             raise ValueError("PlannerConfig: " + "; ".join(errs))
@@ -195,11 +206,15 @@ class ArmPlanner:
             path = [tuple(map(float, q_start)), tuple(map(float, q_goal))]
         else:
             for attempt in range(cfg.attempts):
+                if self.stop.is_set():
+                    break
                 used = attempt + 1
                 path = self._ompl(q_start, q_goal, cfg, attempt)
                 if path is not None:
                     break
         elapsed = time.perf_counter() - t_begin
+        if path is None and self.stop.is_set():
+            return PlanResult(False, CANCELLED, elapsed, attempts=used)
         if path is None:
             return PlanResult(False, f"no plan within {cfg.time_limit:g} s x {cfg.attempts} attempts", elapsed, attempts=used)
         traj = time_parametrize(self.kin.joint_names, path, self.kin.limits,
@@ -209,7 +224,7 @@ class ArmPlanner:
 
     def _motion_valid(self, a: Sequence[float], b: Sequence[float], resolution: float) -> bool:
         qa, qb = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-        n = max(1, int(math.ceil(float(np.max(np.abs(qb - qa))) / resolution)))
+        n = max(1, math.ceil(float(np.max(np.abs(qb - qa))) / resolution))
         return all(self.scene.is_valid(qa + (qb - qa) * k / n) for k in range(1, n + 1))
 
     def _ompl(self, q_start: Sequence[float], q_goal: Sequence[float], cfg: PlannerConfig, attempt: int) -> list[tuple[float, ...]] | None:
@@ -250,7 +265,10 @@ class ArmPlanner:
         if cfg.range > 0:
             planner.setRange(cfg.range)
         ss.setPlanner(planner)
-        status = ss.solve(ob.timedPlannerTerminationCondition(cfg.time_limit))
+        stop = self.stop
+        ptc = ob.plannerOrTerminationCondition(ob.timedPlannerTerminationCondition(cfg.time_limit),
+                                               ob.PlannerTerminationCondition(stop.is_set))
+        status = ss.solve(ptc)
         if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
             return None
         sol = ss.getSolutionPath()
@@ -265,8 +283,8 @@ class ArmPlanner:
             path = self._shortcut(path, cfg.resolution)
         # OMPL interpolates edges by Euclidean distance, we by the largest joint step:
         # a thin obstacle can fall between the samples of one and not the other
-        if not all(self._motion_valid(a, b, cfg.resolution) for a, b in zip(path, path[1:])):
-            if all(self._motion_valid(a, b, cfg.resolution) for a, b in zip(raw, raw[1:])):
+        if not all(self._motion_valid(a, b, cfg.resolution) for a, b in pairwise(path)):
+            if all(self._motion_valid(a, b, cfg.resolution) for a, b in pairwise(raw)):
                 return raw
             log.info("planner: path failed re-validation at %.3f rad; next attempt", cfg.resolution)
             return None
@@ -307,8 +325,10 @@ class ArmPlanner:
         for s in ik_seeds:
             q_goal = self.kin.ik(T_target, s, free_approach_rotation=free_approach_rotation, attempts=1,
                                  is_valid=self.scene.is_valid)
-            if q_goal is not None:
+            if q_goal is not None or self.stop.is_set():
                 break
+        if self.stop.is_set():
+            return PlanResult(False, CANCELLED, time.perf_counter() - t0)
         if q_goal is None:
             q_goal = self.kin.ik(T_target, q_start, free_approach_rotation=free_approach_rotation,
                                  attempts=ik_attempts, is_valid=self.scene.is_valid)
@@ -347,9 +367,11 @@ class ArmPlanner:
         if np.dot(q0, q1) < 0:
             q1 = -q1
         ang = math.acos(min(1.0, abs(float(np.dot(q0, q1))))) * 2
-        n = max(1, int(math.ceil(max(dist / step, ang / 0.05))))
+        n = max(1, math.ceil(max(dist / step, ang / 0.05)))
         path = [tuple(q)]
         for k in range(1, n + 1):
+            if self.stop.is_set():
+                return PlanResult(False, CANCELLED, time.perf_counter() - t0)
             s = k / n
             T = np.eye(4)
             T[:3, 3] = T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3])
