@@ -151,6 +151,10 @@ FAULT_PROFILES: dict[str, FaultProfile] = {
         "arm_fail_first", "the first arm attempt fails (sim: the first arm goal stops half-way and fails; "
                           "mock: the first grasp closes on nothing)",
         sim={"faults": {"arm_fail_attempts": [1]}}, mock={"gripper": {"grasps": [False]}}),
+    "arm_fail_second": _profile(
+        "arm_fail_second", "the second arm attempt fails (sim: arm goal 2, in fetch_item the pick's first move "
+                           "after the initial tuck; mock: the second grasp)",
+        sim={"faults": {"arm_fail_attempts": [2]}}, mock={"gripper": {"grasps": [True, False]}}),
     "arm_fail_twice": _profile(
         "arm_fail_twice", "the first two arm attempts fail (sim: arm goals 1 and 2; mock: grasps 1 and 2)",
         sim={"faults": {"arm_fail_attempts": [1, 2]}}, mock={"gripper": {"grasps": [False, False]}}),

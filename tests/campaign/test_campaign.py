@@ -130,6 +130,8 @@ def test_fault_profiles_overlay_the_backend_section() -> None:
     assert nominal["sim"] == {"world": "lab", "randomize": True}
     first = apply_fault_profile(cfg, FAULT_PROFILES["arm_fail_first"], randomize=False)
     assert first["sim"] == {"world": "lab", "faults": {"arm_fail_attempts": [1]}, "randomize": False}
+    second = apply_fault_profile(cfg, FAULT_PROFILES["arm_fail_second"], randomize=True)
+    assert second["sim"]["faults"] == {"arm_fail_attempts": [2]}
     as_is = apply_fault_profile(cfg, FAULT_PROFILES["config"], randomize=True)
     assert as_is["sim"]["faults"] == {"marker_bias": {"box_2": [0.02, 0.0]}}
     mock = {"backend": "mock", "mock": {"gripper": {"grasps": [False], "object_width": 0.03}}}
