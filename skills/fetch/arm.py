@@ -70,6 +70,11 @@ Gen = Generator[None, None, dict[str, Any]]
 
 R = TypeVar("R")
 
+#: [m] per side: a held item is modelled this much smaller than ``fetch.item_size``, so
+#: the support it was lifted from (touching it, give or take the marker estimate's error)
+#: does not count as a collision at the start of the retract.
+HELD_CLEARANCE = 0.005
+
 
 @dataclass
 class ArmWorkspace:
@@ -419,7 +424,11 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     q_grasp = _q(ctx)
 
     def plan_retract() -> PlanResult:
-        ws.scene.add_item(name, size, T_item)
+        # the held item rests on its board: modelled from the marker estimate, a few mm
+        # of estimate error would put it into the board and fail the retract's start
+        sx, sy, sz = (max(s - 2.0 * HELD_CLEARANCE, 0.5 * s) for s in size)
+        held_size = (sx, sy, sz)
+        ws.scene.add_item(name, held_size, T_item)
         ws.scene.attach_item(name, q_grasp)
         line = ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg)
         if not line.success and line.reason != CANCELLED:
