@@ -33,8 +33,12 @@ __all__ = ["main"]
 
 EXIT_OK, EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 
-#: The requests ``mmexec demo`` serves.
-DEMO_REQUESTS: tuple[dict[str, str], ...] = ({"item": "1"}, {"item": "2"})
+#: The requests ``mmexec demo`` serves (markers of the lab's boxes 3 and 5).
+DEMO_REQUESTS: tuple[dict[str, str], ...] = ({"item": "3"}, {"item": "5"})
+#: The requests ``mmexec demo --mock`` serves.
+MOCK_DEMO_REQUESTS: tuple[dict[str, str], ...] = ({"item": "1"}, {"item": "2"})
+#: Where ``mmexec demo`` writes its event log and video unless ``--out`` says otherwise.
+DEMO_OUT = Path("out") / "demo"
 
 
 class UsageError(Exception):
@@ -88,7 +92,12 @@ def _parser() -> argparse.ArgumentParser:
     from mmexec.executive.campaign import add_campaign_parser
 
     add_campaign_parser(sub)
-    sub.add_parser("demo", help="run the embedded demo (mock backend, two requests)")
+    d = sub.add_parser("demo", help="run the embedded demo: the fetch mission in the headless simulator, two requests")
+    d.add_argument("--out", type=Path, default=DEMO_OUT, metavar="DIR",
+                   help=f"folder for the event log and the video (default {DEMO_OUT})")
+    d.add_argument("--no-record", action="store_true", help="do not record the video")
+    d.add_argument("--mock", action="store_true",
+                   help="the small mock-backend demo instead (trees/demo_mock.yaml, no simulator)")
     sub.add_parser("hw", help="hardware bring-up tools (mmexec hw --help)", add_help=False)
     return p
 
@@ -360,17 +369,66 @@ def _cmd_run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return _run(args.mission, args.config, requests, args, argv)
 
 
-def _cmd_demo(argv: Sequence[str]) -> int:
+def _cmd_demo(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``mmexec demo``: trees/fetch_item.yaml on config/locobot_sim.yaml (package data),
+    headless, requests item=3 and item=5; the event log and a video go to ``--out``; a
+    per-request table closes the output. ``--mock``: trees/demo_mock.yaml on the mock."""
     from mmexec.executive.runner import Request
 
-    mission_res = importlib.resources.files("mmexec.trees").joinpath("demo_mock.yaml")
-    config_res = importlib.resources.files("mmexec.config").joinpath("mock.yaml")
+    if args.mock:
+        mission_res = importlib.resources.files("mmexec.trees").joinpath("demo_mock.yaml")
+        config_res = importlib.resources.files("mmexec.config").joinpath("mock.yaml")
+        with importlib.resources.as_file(mission_res) as mission, importlib.resources.as_file(config_res) as config:
+            print(f"mmexec demo: {mission.name} on the mock backend ({config.name}), "
+                  f"{len(MOCK_DEMO_REQUESTS)} requests")
+            reqs = [Request(dict(r), ArgMark("demo request", i, 1)) for i, r in enumerate(MOCK_DEMO_REQUESTS, start=1)]
+            ns = argparse.Namespace(param=[], seed=0, log=None, rate=None, watch=False, gui=False, record=None,
+                                    request_timeout=None)
+            return _run(mission, config, reqs, ns, argv)
+
+    from mmexec.executive.runner import RunOptions, Runner
+
+    out_dir: Path = args.out
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError.at(Mark(str(out_dir), 1, 1), f"--out: cannot create the folder: {e.strerror or e}") from None
+    log_path = out_dir / "events.jsonl"
+    video = None if args.no_record else out_dir / "demo.mp4"
+    mission_res = importlib.resources.files("mmexec.trees").joinpath("fetch_item.yaml")
+    config_res = importlib.resources.files("mmexec.config").joinpath("locobot_sim.yaml")
     with importlib.resources.as_file(mission_res) as mission, importlib.resources.as_file(config_res) as config:
-        print(f"mmexec demo: {mission.name} on the mock backend ({config.name}), {len(DEMO_REQUESTS)} requests")
+        print(f"mmexec demo: {mission.name} on the simulated LoCoBot ({config.name}, lab world, headless), "
+              f"{len(DEMO_REQUESTS)} requests")
         reqs = [Request(dict(r), ArgMark("demo request", i, 1)) for i, r in enumerate(DEMO_REQUESTS, start=1)]
-        ns = argparse.Namespace(param=[], seed=0, log=None, rate=None, watch=False, gui=False, record=None,
-                                request_timeout=None)
-        return _run(mission, config, reqs, ns, argv)
+        opts = RunOptions(mission=mission, config=config, requests=reqs, seed=0, log_path=log_path,
+                          record=video, argv=list(argv))
+        _preload_backend_quietly("sim")
+        runner = Runner(opts)
+        runner.prepare()
+        _CURRENT_LOG[0] = log_path
+        code = runner.run()
+    print()
+    print(demo_table(runner.results))
+    print(f"event log: {log_path}")
+    if video is not None:
+        print(f"video: {video}")
+    return code
+
+
+def demo_table(results: Sequence[Any]) -> str:
+    """The per-request table of ``mmexec demo``: request, result, clock time [s],
+    recoveries used and failure reason, one row per
+    :class:`~mmexec.executive.runner.RequestResult`."""
+    head = ("request", "result", "clock s", "recoveries", "failure reason")
+    rows = [(f"{r.index} ({', '.join(f'{k}={v}' for k, v in r.request.items())})", r.outcome, f"{r.duration:.1f}",
+             str(r.recoveries), r.reason or "-") for r in results]
+    widths = [max(len(head[i]), *(len(row[i]) for row in rows)) if rows else len(head[i]) for i in range(4)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(head[:4], widths)) + "  " + head[4]]
+    lines.append("  ".join("-" * w for w in widths) + "  " + "-" * len(head[4]))
+    for row in rows:
+        lines.append("  ".join(c.ljust(w) for c, w in zip(row[:4], widths)) + "  " + row[4])
+    return "\n".join(lines)
 
 
 def _cmd_log(args: argparse.Namespace) -> int:
@@ -439,7 +497,7 @@ def _dispatch(argv: list[str]) -> int:
             raise UsageError("mmexec log: expected 'summary FILE' or 'replay FILE'")
         return _cmd_log(args)
     if args.command == "demo":
-        return _cmd_demo(argv)
+        return _cmd_demo(args, argv)
     if args.command == "campaign":
         from mmexec.executive.campaign import cmd_campaign
 

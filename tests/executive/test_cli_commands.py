@@ -188,7 +188,7 @@ def test_summary_of_a_crashed_run(run_cli, tmp_path: Path) -> None:
 
 def test_demo_runs_two_requests(run_cli, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(tmp_path)
-    res = run_cli("demo")
+    res = run_cli("demo", "--mock")  # the sim fetch demo (plain `demo`) is tested in tests/e2e/test_demo.py
     assert res.rc == 0, res.err
     assert "request 1/2 (item=1): success" in res.out and "1 recovery" in res.out
     assert "request 2/2 (item=2): success" in res.out
