@@ -488,9 +488,9 @@ def run_trial(spec: TrialSpec) -> TrialResult:
             _stop_trial(proc)
             raise
     wall = time.monotonic() - t0
-    if rc == 2 and not note:
+    if not note and rc == 2:
         note = f"bad input: {_tail(spec.out_path, 5)}"
-    elif rc not in (0, 1, None) and not note and rc is not None and rc > 0:
+    elif not note and rc is not None and rc > 1:
         note = f"trial process exited with code {rc}: {_tail(spec.out_path)}"
     return parse_trial_log(spec, exit_code=rc, wall=wall, note=note)
 
@@ -714,7 +714,7 @@ class Campaign:
         o = self.options
         workers = o.workers or os.cpu_count() or 1
         where = f"Ray ({o.ray or 'local'})" if o.ray is not None else f"{min(workers, max(1, len(pending)))} local processes"
-        self._say(f"campaign {self.dir}: {len(self.specs)} trials ({len(done)} already done, {len(pending)} to run "
+        self.say(f"campaign {self.dir}: {len(self.specs)} trials ({len(done)} already done, {len(pending)} to run "
                   f"on {where}); fault profile {self.identity.get('faults')}, recovery "
                   f"{'on' if o.recovery else 'off'}, seed {o.seed}")
         progress = _CampaignProgress(self.out, total=len(self.specs), done=list(done.values()),
@@ -731,7 +731,8 @@ class Campaign:
         progress.finish()
         return [done[s.index] for s in self.specs if s.index in done]
 
-    def _say(self, line: str) -> None:
+    def say(self, line: str) -> None:
+        """Write one line of user-facing output."""
         self.out.write(line + "\n")
         self.out.flush()
 
@@ -906,7 +907,7 @@ def run_campaign(options: CampaignOptions, *, out: TextIO | None = None) -> tupl
     campaign.prepare()
     results = campaign.run()
     summary = write_outputs(campaign.dir, campaign.identity, results, compare=options.compare)
-    campaign._say(
+    campaign.say(
         f"{summary['successes']}/{summary['trials']} trials succeeded (success rate "
         f"{summary['success_rate']:.3f}, 95% CI {summary['success_rate_ci95'][0]:.3f}-"
         f"{summary['success_rate_ci95'][1]:.3f}), {summary['errors']} errors; report: {campaign.dir / 'report.md'}"
