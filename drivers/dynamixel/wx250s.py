@@ -36,13 +36,14 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Self
+from typing import Self, TypeVar
 
 import numpy as np
 
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,
+    CorruptReply,
     DxlBus,
     DxlLinkError,
     DynamixelError,
@@ -109,6 +110,8 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+_T = TypeVar("_T")
 
 PRESENT_ADDR = 126
 PRESENT_LEN = 12
@@ -402,15 +405,29 @@ class WX250s:
                     f"{bus.port}: servo id {dxl_id} ({self.name_of[dxl_id]}) is {name} ({got}), "
                     f"expected {want.name} ({want.number})"
                 )
+        def retry(call: Callable[..., _T], *args: object) -> _T:
+            """One configuration exchange, repeated (``ping_attempts`` in all) when its reply
+            is missing or corrupt: the writes are idempotent, and one lost status on a noisy
+            bus should not fail the bring-up. Link loss and servo errors are not retried."""
+            last: DxlLinkError | None = None
+            for _ in range(cfg.ping_attempts):
+                try:
+                    return call(*args)
+                except (NoReply, CorruptReply) as e:
+                    log.debug("%s: bring-up exchange retried: %s", bus.port, e)
+                    last = e
+            assert last is not None
+            raise last
+
         ids = self.servo_ids()
         for dxl_id in ids:
-            bus.write(dxl_id, TORQUE_ENABLE, b"\x00")
+            retry(bus.write, dxl_id, TORQUE_ENABLE, b"\x00")
         for dxl_id in ids:
-            if bus.read(dxl_id, HW_ERROR, 1)[0]:
+            if retry(bus.read, dxl_id, HW_ERROR, 1)[0]:
                 raise HardwareFault(
                     bus.port,
                     dxl_id,
-                    decode_hardware_error(bus.read(dxl_id, HW_ERROR, 1)[0]),
+                    decode_hardware_error(retry(bus.read, dxl_id, HW_ERROR, 1)[0]),
                     self.name_of[dxl_id],
                 )
         for j in self.all_joints:
@@ -422,32 +439,32 @@ class WX250s:
                 targets.append((j.shadow, drive | 0x01, j.id))
             for dxl_id, dmode, secondary in targets:
                 if cfg.write_eeprom:
-                    bus.write(dxl_id, 9, b"\x00")  # Return Delay Time 0
-                    bus.write(dxl_id, 10, bytes((dmode,)))  # Drive Mode
-                    bus.write(dxl_id, 12, bytes((secondary,)))  # Secondary ID
-                    bus.write(dxl_id, 44, codec.int_to_le(131, 4))  # Velocity Limit 30 rpm
-                    bus.write(dxl_id, 48, codec.int_to_le(j.max_pulses, 4))  # Max Position Limit
-                    bus.write(dxl_id, 52, codec.int_to_le(j.min_pulses, 4))  # Min Position Limit
-                    bus.write(dxl_id, 63, bytes((cfg.shutdown_mask,)))  # Shutdown
-                bus.write(dxl_id, 11, bytes((int(mode),)))  # Operating Mode
+                    retry(bus.write, dxl_id, 9, b"\x00")  # Return Delay Time 0
+                    retry(bus.write, dxl_id, 10, bytes((dmode,)))  # Drive Mode
+                    retry(bus.write, dxl_id, 12, bytes((secondary,)))  # Secondary ID
+                    retry(bus.write, dxl_id, 44, codec.int_to_le(131, 4))  # Velocity Limit 30 rpm
+                    retry(bus.write, dxl_id, 48, codec.int_to_le(j.max_pulses, 4))  # Max Position Limit
+                    retry(bus.write, dxl_id, 52, codec.int_to_le(j.min_pulses, 4))  # Min Position Limit
+                    retry(bus.write, dxl_id, 63, bytes((cfg.shutdown_mask,)))  # Shutdown
+                retry(bus.write, dxl_id, 11, bytes((int(mode),)))  # Operating Mode
                 if j is GRIPPER:
-                    bus.write(dxl_id, GOAL_PWM, codec.int_to_le(0, 2))
+                    retry(bus.write, dxl_id, GOAL_PWM, codec.int_to_le(0, 2))
                 elif arm_group:
-                    bus.write(dxl_id, 108, codec.int_to_le(cfg.profile_acceleration_ms, 4))
-                    bus.write(dxl_id, 112, codec.int_to_le(cfg.profile_velocity_ms, 4))
+                    retry(bus.write, dxl_id, 108, codec.int_to_le(cfg.profile_acceleration_ms, 4))
+                    retry(bus.write, dxl_id, 112, codec.int_to_le(cfg.profile_velocity_ms, 4))
                 else:
-                    bus.write(dxl_id, 108, codec.int_to_le(15, 4))
-                    bus.write(dxl_id, 112, codec.int_to_le(131, 4))
+                    retry(bus.write, dxl_id, 108, codec.int_to_le(15, 4))
+                    retry(bus.write, dxl_id, 112, codec.int_to_le(131, 4))
         models = {i: self.by_id[i].model for i in self.read_ids}
         self._io = CycleIO(bus, [j.id for j in self.position_joints], self.read_ids, models)
-        readings = self._io.read_state()
+        readings = retry(self._io.read_state)
         goals = []
         for j in self.position_joints:
             p = min(max(readings[j.id].raw_position, j.min_pulses), j.max_pulses)
             goals.append(p)
-            bus.write(j.id, GOAL_POSITION, codec.int_to_le(p, 4))
+            retry(bus.write, j.id, GOAL_POSITION, codec.int_to_le(p, 4))
         for dxl_id in ids:
-            bus.write(dxl_id, TORQUE_ENABLE, b"\x01")
+            retry(bus.write, dxl_id, TORQUE_ENABLE, b"\x01")
         with self._lock:
             self._goals_pulses = goals
             self._sent_goals = list(goals)

@@ -10,7 +10,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
-from mmexec.drivers.dynamixel.bus import HardwareFault, NoReply, PortUnavailable
+from mmexec.drivers.dynamixel.bus import CorruptReply, HardwareFault, NoReply, PortUnavailable
 from mmexec.drivers.dynamixel.control_table import OperatingMode, pulses_to_rad
 from mmexec.drivers.dynamixel.wx250s import (
     WX250s,
@@ -368,3 +368,42 @@ def test_reboot_waits_for_the_servo_to_restart(fake: FakeDxlBus, boot_s: float, 
             )
     finally:
         dev.close()
+
+
+def _lose_write_statuses(monkeypatch: pytest.MonkeyPatch, address: int, count: int) -> list[int]:
+    """Make the fake corrupt the status of the next ``count`` writes to ``address``."""
+    from mmexec.drivers.dynamixel.codec import Instruction
+    from mmexec.drivers.fakes import dynamixel as fake_module
+
+    write = fake_module._HANDLERS[Instruction.WRITE]
+    lost: list[int] = []
+
+    def losing(bus: FakeDxlBus, packet: object, now: float) -> None:
+        if len(lost) < count and int.from_bytes(packet.params[:2], "little") == address:  # type: ignore[attr-defined]
+            lost.append(packet.id)  # type: ignore[attr-defined]
+            bus.corrupt_replies = 1
+        write(bus, packet, now)
+
+    monkeypatch.setitem(fake_module._HANDLERS, Instruction.WRITE, losing)
+    return lost
+
+
+def test_bring_up_retries_a_lost_configuration_status(
+    fake: FakeDxlBus, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    lost = _lose_write_statuses(monkeypatch, 64, 2)  # servo 1: two attempts lost, third ok
+    dev = WX250s(cfg(fake.port))
+    dev.connect()
+    try:
+        assert lost == [1, 1] and dev.connected
+        assert all(fake.servo(i).torque for i in range(1, 10))
+    finally:
+        dev.close()
+
+
+def test_bring_up_gives_up_after_ping_attempts(fake: FakeDxlBus, monkeypatch: pytest.MonkeyPatch) -> None:
+    lost = _lose_write_statuses(monkeypatch, 64, 3)  # every attempt on servo 1
+    dev = WX250s(cfg(fake.port))
+    with pytest.raises(CorruptReply, match=rf"{fake.port}: corrupt reply \(CRC mismatch\) from servo id 1"):
+        dev.connect()
+    assert lost == [1, 1, 1] and not dev.bus.is_open
