@@ -22,6 +22,7 @@ import time
 
 import cv2
 import numpy as np
+
 from mmexec.drivers.interfaces import CameraFrame, CameraIntrinsics
 from mmexec.skills.perception.averaging import rotation_angle
 from mmexec.skills.perception.markers import DetectorConfig, MarkerDetector, observe_markers

@@ -386,7 +386,7 @@ def _cmd_demo(args: argparse.Namespace, argv: Sequence[str]) -> int:
                                     request_timeout=None)
             return _run(mission, config, reqs, ns, argv)
 
-    from mmexec.executive.runner import RunOptions, Runner
+    from mmexec.executive.runner import Runner, RunOptions
 
     out_dir: Path = args.out
     try:

@@ -14,6 +14,7 @@ from collections.abc import Generator
 from typing import Any
 
 import numpy as np
+
 from mmexec.drivers.interfaces import CameraFrame
 from mmexec.skills.base import FailureKind, Output, Param, SkillContext, SkillFailure, skill
 from mmexec.skills.fetch.common import MarkerEstimate, fetch_profile, markers

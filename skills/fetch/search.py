@@ -100,7 +100,7 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
         from mmexec.skills.fetch.arm import move_named
 
         yield from move_named(ctx, look_pose)
-    n_steps = int(math.floor(turn / step_deg + 1e-9))
+    n_steps = math.floor(turn / step_deg + 1e-9)
     stops: list[tuple[Pose2D, str] | None] = [None] + list(locs)
     for stop in stops:
         if stop is not None:

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
 from mmexec.drivers.interfaces import CameraFrame, CameraIntrinsics
 
 __all__ = [
@@ -366,7 +367,7 @@ class MarkerDetector:
             m = cfg.roi_margin * float(max(hi - lo))
             self._last.append((
                 max(0, int(lo[0] - m)), max(0, int(lo[1] - m)),
-                min(W, int(math.ceil(hi[0] + m)) + 1), min(H, int(math.ceil(hi[1] + m)) + 1),
+                min(W, math.ceil(hi[0] + m) + 1), min(H, math.ceil(hi[1] + m) + 1),
             ))
         return dets
 

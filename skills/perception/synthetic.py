@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
 from mmexec.drivers.interfaces import CameraIntrinsics
 
 __all__ = ["SyntheticView", "look_at_marker", "render_marker_view", "render_markers_view"]

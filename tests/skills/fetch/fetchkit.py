@@ -4,13 +4,10 @@ the map (``mmexec.skills.perception.synthetic``), seen from the mock base's pose
 
 from __future__ import annotations
 
-import copy
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
-import pytest
 
 from mmexec.drivers.interfaces import Camera, CameraFrame, CameraIntrinsics, OccupancyGrid, Pose2D
 from mmexec.drivers.mock.robot import MockRobot
@@ -95,7 +92,7 @@ def room_grid(size: tuple[float, float] = (6.0, 6.0), resolution: float = 0.05,
     data = np.zeros((h, w), np.int8)
     data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
     for x0, y0, x1, y1 in boxes:
-        data[int(y0 / resolution):int(math.ceil(y1 / resolution)), int(x0 / resolution):int(math.ceil(x1 / resolution))] = 100
+        data[int(y0 / resolution):math.ceil(y1 / resolution), int(x0 / resolution):math.ceil(x1 / resolution)] = 100
     return OccupancyGrid(data, resolution, Pose2D(0.0, 0.0, 0.0))
 
 

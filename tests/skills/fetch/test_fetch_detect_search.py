@@ -6,11 +6,10 @@ import math
 
 import numpy as np
 import pytest
+from fetchkit import events_of, marker_pose, run_skill
 
 from mmexec.skills.base import FailureKind, SkillStatus
 from mmexec.skills.fetch.common import WORLD_MARKERS, WORLD_SEARCH
-
-from fetchkit import events_of, marker_pose, run_skill
 
 
 def _deg(headings: list[float]) -> list[int]:

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from mmexec.skills.perception.averaging import (
     MarkerPoseEstimator,
     average_poses,

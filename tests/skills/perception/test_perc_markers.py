@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from mmexec.drivers.interfaces import CameraFrame, CameraIntrinsics
 from mmexec.skills.perception.averaging import rotation_angle
 from mmexec.skills.perception.markers import (
@@ -13,7 +14,11 @@ from mmexec.skills.perception.markers import (
     observe_markers,
     refine_pose_with_depth,
 )
-from mmexec.skills.perception.synthetic import look_at_marker, render_marker_view, render_markers_view
+from mmexec.skills.perception.synthetic import (
+    look_at_marker,
+    render_marker_view,
+    render_markers_view,
+)
 
 K = CameraIntrinsics(640, 480, 615.0, 615.0, 319.5, 239.5)
 L = 0.10
@@ -171,8 +176,8 @@ def test_render_markers_view_depth_follows_each_marker_plane():
     T3 = look_at_marker(1.0, offset=(-0.2, 0.0))
     T8 = look_at_marker(1.5, offset=(0.25, 0.0))
     v = render_markers_view(K, [(T3, 3), (T8, 8)], L)
-    u8 = int(round(K.fx * 0.25 / 1.5 + K.cx))
-    u3 = int(round(K.fx * -0.2 / 1.0 + K.cx))
+    u8 = round(K.fx * 0.25 / 1.5 + K.cx)
+    u3 = round(K.fx * -0.2 / 1.0 + K.cx)
     assert v.depth[240, u3] == pytest.approx(1.0, abs=1e-3)
     assert v.depth[240, u8] == pytest.approx(1.5, abs=1e-3)
     # a marker facing away is not drawn
