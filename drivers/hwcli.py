@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"mmexec hw {action} {device}: interrupted", file=sys.stderr)
         return 130
-    except Exception as e:  # noqa: BLE001 - the CLI contract is one line, never a traceback
+    except Exception as e:
         log.debug("mmexec hw %s %s failed", action, device, exc_info=True)
         print(f"mmexec hw {action} {device}: {type(e).__name__}: {e}", file=sys.stderr)
         return 1

@@ -14,6 +14,7 @@ import os
 import termios
 import time
 from dataclasses import dataclass
+from typing import Self
 
 import serial
 
@@ -189,7 +190,7 @@ class SerialTransport:
         except _PORT_ERRORS as e:
             raise LinkClosed(self.port, f"flush failed: {e}") from e
 
-    def __enter__(self) -> SerialTransport:
+    def __enter__(self) -> Self:
         self.open()
         return self
 

@@ -231,7 +231,7 @@ class KobukiFake(PtyDevice):
         pwm = max(-127, min(127, round(left / 7.0))), max(-127, min(127, round(right / 7.0)))
         core = k.CoreSensors(
             s.timestamp_ms, s.bumper, s.wheel_drop, s.cliff,
-            int(math.floor(s.left_encoder)) & 0xFFFF, int(math.floor(s.right_encoder)) & 0xFFFF,
+            math.floor(s.left_encoder) & 0xFFFF, math.floor(s.right_encoder) & 0xFFFF,
             pwm[0], pwm[1], s.buttons, s.charger, s.battery, s.overcurrent,
         )
         self._gyro_frame = (self._gyro_frame + 1) & 0xFF

@@ -25,6 +25,7 @@ import select
 import threading
 import time
 import tty
+from typing import Self
 
 __all__ = ["PtyDevice"]
 
@@ -92,7 +93,7 @@ class PtyDevice:
                         log.debug("%s: fd %s already closed", self.name, fd)
             self._master = self._slave = None
 
-    def __enter__(self) -> PtyDevice:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -144,7 +145,7 @@ class PtyDevice:
                     self.bytes_in += len(data)
                     try:
                         self.on_bytes(data)
-                    except Exception:  # noqa: BLE001 - a fake's bug must not kill the thread silently
+                    except Exception:
                         log.exception("%s: on_bytes failed", self.name)
             if self.tick_period is not None:
                 now = time.monotonic()
@@ -153,5 +154,5 @@ class PtyDevice:
                     if not self.silent:
                         try:
                             self.on_tick(now)
-                        except Exception:  # noqa: BLE001
+                        except Exception:
                             log.exception("%s: on_tick failed", self.name)

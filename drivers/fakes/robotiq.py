@@ -40,6 +40,7 @@ import selectors
 import socket
 import threading
 import time
+from typing import Self
 
 from mmexec.drivers.fakes.pty import PtyDevice
 from mmexec.drivers.robotiq import codec
@@ -449,7 +450,7 @@ class FakeURCap:
                 c.close()
             self._clients.clear()
 
-    def __enter__(self) -> FakeURCap:
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

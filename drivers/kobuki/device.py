@@ -32,6 +32,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass
+from typing import Self
 
 from mmexec.drivers.interfaces import BaseState, Clock, MonotonicClock, Pose2D
 from mmexec.drivers.kobuki import codec as k
@@ -299,7 +300,7 @@ class KobukiDevice:
         self.close()
         return self.connect()
 
-    def __enter__(self) -> KobukiDevice:
+    def __enter__(self) -> Self:
         self.connect()
         return self
 
@@ -368,8 +369,10 @@ class KobukiDevice:
                 self._measured[0], self._measured[1], self._stamp, self._faults_locked(),
             )
 
-    def reset_odometry(self, pose: Pose2D = Pose2D()) -> None:
-        """Set the odometry pose (e.g. to the robot's known start pose in ``map``)."""
+    def reset_odometry(self, pose: Pose2D | None = None) -> None:
+        """Set the odometry pose (e.g. to the robot's known start pose in ``map``; the
+        origin when None)."""
+        pose = pose if pose is not None else Pose2D()
         with self._lock:
             self._odom.reset(pose.x, pose.y, pose.theta)
 

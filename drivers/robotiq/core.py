@@ -24,6 +24,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
+from typing import Self
 
 from mmexec.drivers.interfaces import Clock, Goal, GraspState, GripperState, MonotonicClock
 from mmexec.drivers.robotiq import codec
@@ -209,7 +210,7 @@ class RobotiqDevice(abc.ABC):
         self.close()
         return self.open()
 
-    def __enter__(self) -> RobotiqDevice:
+    def __enter__(self) -> Self:
         self.open()
         return self
 

@@ -526,9 +526,8 @@ class URArm(Arm):
             m = self._motion
             if m is not None and m.goal is cmd[1] and m.phase != "stopping":
                 self._begin_stop(m)
-        elif kind == "stop":
-            if self._motion is None and self._ctl is not None and not self._link_lost:
-                self._call("stopJ", self._ctl.stopJ, self.config.stop_deceleration, True)
+        elif kind == "stop" and self._motion is None and self._ctl is not None and not self._link_lost:
+            self._call("stopJ", self._ctl.stopJ, self.config.stop_deceleration, True)
 
     def _do_connect(self, goal: Goal) -> None:
         self._disconnect_all()

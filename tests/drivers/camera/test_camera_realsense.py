@@ -46,7 +46,7 @@ def fake_rs(fail_start: bool = False) -> types.ModuleType:
     state: dict[str, object] = {"enabled": [], "aligned_to": None, "stopped": False}
     rs.state = state  # type: ignore[attr-defined]
 
-    class config:  # noqa: N801 - pyrealsense2's names
+    class config:
         def enable_stream(self, *args: object) -> None:
             state["enabled"].append(args)  # type: ignore[attr-defined]
 
@@ -61,7 +61,7 @@ def fake_rs(fail_start: bool = False) -> types.ModuleType:
         get_stream=lambda s: types.SimpleNamespace(
             as_video_stream_profile=lambda: types.SimpleNamespace(get_intrinsics=lambda: intr)))
 
-    class pipeline:  # noqa: N801
+    class pipeline:
         def start(self, cfg: config) -> object:
             if fail_start:
                 raise RuntimeError("No device connected")
@@ -77,7 +77,7 @@ def fake_rs(fail_start: bool = False) -> types.ModuleType:
         def stop(self) -> None:
             state["stopped"] = True
 
-    class align:  # noqa: N801
+    class align:
         def __init__(self, to: str) -> None:
             state["aligned_to"] = to
 

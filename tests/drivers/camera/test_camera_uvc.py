@@ -54,7 +54,7 @@ class FakeCapture:
         self.settings: dict[int, float] = {}
         self.released = False
 
-    def isOpened(self) -> bool:  # noqa: N802
+    def isOpened(self) -> bool:
         return self.opened
 
     def set(self, prop: int, value: float) -> bool:

@@ -70,10 +70,10 @@ def test_parser_never_loses_a_frame_after_garbage(garbage: bytes) -> None:
 
 
 def _core(**kw: object) -> k.CoreSensors:
-    base = dict(
-        timestamp_ms=1234, bumper=0, wheel_drop=0, cliff=0, left_encoder=100, right_encoder=65535,
-        left_pwm=-3, right_pwm=7, buttons=0x02, charger=0x16, battery=16.5, overcurrent=0,
-    )
+    base = {
+        "timestamp_ms": 1234, "bumper": 0, "wheel_drop": 0, "cliff": 0, "left_encoder": 100, "right_encoder": 65535,
+        "left_pwm": -3, "right_pwm": 7, "buttons": 0x02, "charger": 0x16, "battery": 16.5, "overcurrent": 0,
+    }
     base.update(kw)
     return k.CoreSensors(**base)  # type: ignore[arg-type]
 

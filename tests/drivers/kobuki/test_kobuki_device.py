@@ -24,7 +24,7 @@ from mmexec.drivers.kobuki.device import (
 from mmexec.drivers.transport import SerialSettings, SerialTransport
 
 Waiter = Callable[..., bool]
-FAST = dict(linear_accel=5.0, angular_accel=20.0)
+FAST = {"linear_accel": 5.0, "angular_accel": 20.0}
 
 
 def _device(fake: KobukiFake, clock: ManualClock | None = None, **kw: object) -> KobukiDevice:

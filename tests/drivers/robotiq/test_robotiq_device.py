@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 from collections.abc import Iterator
 
@@ -316,7 +317,7 @@ def test_requests_spaced_and_deadline_from_link(fake: FakeRobotiq,
                                                 gripper: RobotiqGripper) -> None:
     assert finish(gripper.move(0.01, speed=0.15)) is GoalState.SUCCEEDED
     times = fake.request_times[-20:]
-    gaps = [b - a for a, b in zip(times, times[1:])]
+    gaps = [b - a for a, b in itertools.pairwise(times)]
     assert min(gaps) >= 0.0045
     dev = gripper.device
     assert isinstance(dev, RobotiqModbus)

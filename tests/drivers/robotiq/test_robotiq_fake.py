@@ -44,7 +44,7 @@ def activate(link: SerialTransport) -> None:
 
 
 def test_activation_states(bus) -> None:  # type: ignore[no-untyped-def]
-    fake, link = bus
+    _fake, link = bus
     assert status(link).status_byte == 0x00
     write(link, Command(rACT=True))
     assert status(link).status_byte == 0x11      # activating
@@ -93,7 +93,7 @@ def test_fc06_fc23_and_output_readback(bus) -> None:  # type: ignore[no-untyped-
     ],
 )
 def test_silence_for_invalid_requests(bus, frame: bytes) -> None:  # type: ignore[no-untyped-def]
-    fake, link = bus
+    _fake, link = bus
     link.write(frame)
     with pytest.raises(LinkTimeout):
         link.read(1, time.monotonic() + 0.1)
@@ -112,7 +112,7 @@ def test_fault_switches_no_reply_and_bad_crc(bus) -> None:  # type: ignore[no-un
 
 
 def test_priority_faults(bus) -> None:  # type: ignore[no-untyped-def]
-    fake, link = bus
+    _fake, link = bus
     # 0x07: rGTO without rACT; cleared by activation
     write(link, Command(rGTO=True, rPR=100))
     assert status(link).gFLT == 0x07
@@ -154,7 +154,7 @@ def test_minor_faults(bus) -> None:  # type: ignore[no-untyped-def]
 
 
 def test_auto_release(bus) -> None:  # type: ignore[no-untyped-def]
-    fake, link = bus
+    _fake, link = bus
     activate(link)
     write(link, Command(rACT=True, rGTO=True, rPR=120, rSP=255))
     assert wait_for(lambda: status(link).gOBJ == 3, 1.0)
