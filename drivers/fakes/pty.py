@@ -13,6 +13,9 @@ Fault switches shared by every fake:
   pulled USB cable does (EIO), and the port path disappears;
 * ``inject(bytes)``: push raw bytes (garbage, truncated frames) to the driver.
 
+Like a device on a UART, a fake never waits for the host: bytes sent while the driver side
+is not reading and the pty buffer is full are dropped (counted in ``bytes_dropped``).
+
 Everything is bounded: the I/O thread polls with a short timeout and exits on
 :meth:`stop`, and :meth:`stop` joins it.
 """
@@ -49,6 +52,8 @@ class PtyDevice:
         self._lock = threading.RLock()
         self.bytes_in = 0
         self.bytes_out = 0
+        #: bytes lost because the driver side was not reading (a full pty buffer)
+        self.bytes_dropped = 0
 
     # -- lifecycle
     @property
@@ -62,6 +67,9 @@ class PtyDevice:
         master, slave = os.openpty()
         tty.setraw(master)
         tty.setraw(slave)
+        # a device never waits for its host: with nobody reading the port, what it sends is
+        # lost (as on a UART), instead of blocking the fake (and stop()) on a full buffer
+        os.set_blocking(master, False)
         self._master, self._slave = master, slave
         self._port = os.ttyname(slave)
         self._stop.clear()
@@ -106,10 +114,17 @@ class PtyDevice:
             if self.silent or self._master is None or not data:
                 return
             try:
-                os.write(self._master, data)
-                self.bytes_out += len(data)
+                sent = os.write(self._master, data)
+            except BlockingIOError:
+                sent = 0
             except OSError as e:
                 log.debug("%s: write failed: %s", self.name, e)
+                return
+            self.bytes_out += sent
+            if sent < len(data):
+                self.bytes_dropped += len(data) - sent
+                log.debug("%s: driver side not reading: %d bytes dropped", self.name,
+                          len(data) - sent)
 
     def inject(self, data: bytes) -> None:
         """Send raw bytes regardless of protocol (garbage, truncated frames)."""
