@@ -30,7 +30,7 @@ def rig() -> Iterator[tuple[URArm, FakeURController, ManualClock]]:
     clock = ManualClock()
     ctrl = FakeURController(clock)
     arm = URArm(
-        URArmConfig(host="fake-ur", frequency=200.0, command_timeout=0.3, connect_timeout=0.5),
+        URArmConfig(host="fake-ur", frequency=200.0, command_timeout=0.3, connect_timeout=2.0),
         clock=clock,
         control_factory=ctrl.control_factory,
         receive_factory=ctrl.receive_factory,
