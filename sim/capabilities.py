@@ -521,8 +521,14 @@ class SimGripper(Gripper):
         # a held item must follow the arm: awake, and never put to sleep while held
         p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_WAKE_UP, physicsClientId=c.cid)
         p.changeDynamics(body, -1, activationState=p.ACTIVATION_STATE_DISABLE_SLEEPING, physicsClientId=c.cid)
-        # offset along the fingers (tool x for both models' pad length axis)
-        along = abs(rel[0, 3]) if c.info.gripper_mode == "interbotix" else abs(rel[2, 3])
+        # offset from the pad centre along the fingers: the Interbotix tool frame sits at
+        # the pads (its x runs along them); the Robotiq's tool link is the flange (tool0),
+        # so its pads' centre lies along tool z, measured from the pad links themselves
+        if c.info.gripper_mode == "interbotix":
+            along = abs(rel[0, 3])
+        else:
+            pads_z = [float((np.linalg.inv(T_tool) @ c.link_T(n))[2, 3]) for n in c.info.finger_links]
+            along = abs(rel[2, 3] - sum(pads_z) / len(pads_z))
         hold = self.friction * self._force
         if along > self.slip_offset:
             hold = 0.3 * mass * 9.81
