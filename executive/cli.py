@@ -174,9 +174,10 @@ def _quiet_stderr_fd() -> Iterator[None]:
         os.close(saved)
 
 
-def _preload_backend_quietly(backend: str) -> None:
-    """Import pybullet with its banner suppressed before the sim backend imports it."""
-    if backend != "sim" or "pybullet" in sys.modules:
+def _preload_pybullet_quietly() -> None:
+    """Import pybullet with its build banner suppressed, before the sim backend or the
+    built-in arm skills (planning scene) import it, whatever the backend."""
+    if "pybullet" in sys.modules:
         return
     try:
         with _quiet_stderr_fd():
@@ -189,7 +190,7 @@ def _load_for_mission(config: Path | None) -> Any:
     from mmexec.executive.config import load_config, load_skill_modules
 
     loaded = load_config(config) if config is not None else None
-    _preload_backend_quietly("sim")  # the built-in arm skills import pybullet: no banner
+    _preload_pybullet_quietly()  # the built-in arm skills import pybullet: no banner
     load_skill_modules(loaded)
     return loaded
 
@@ -271,7 +272,7 @@ def _check_binding(mission: Any, loaded: Any) -> None:
     Nothing is opened: see :func:`binding_capabilities`."""
     from mmexec.skills.base import SkillSpec
 
-    _preload_backend_quietly(loaded.backend)
+    _preload_pybullet_quietly()
     caps = binding_capabilities(loaded)
     problems: list[Problem] = []
     for spec in _walk_specs(mission.root_file.tree):
@@ -347,7 +348,7 @@ def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namesp
         opts.recovery_enabled = not getattr(args, "no_recovery", False)
         if opts.request_timeout is not None and opts.request_timeout <= 0:
             raise InputError.at(ArgMark("--request-timeout", 1, 1), "expected seconds > 0")
-    _preload_backend_quietly(load_config(config).backend)
+    _preload_pybullet_quietly()
     runner = Runner(opts)
     runner.prepare()
     if params:
@@ -403,7 +404,7 @@ def _cmd_demo(args: argparse.Namespace, argv: Sequence[str]) -> int:
         reqs = [Request(dict(r), ArgMark("demo request", i, 1)) for i, r in enumerate(DEMO_REQUESTS, start=1)]
         opts = RunOptions(mission=mission, config=config, requests=reqs, seed=0, log_path=log_path,
                           record=video, argv=list(argv))
-        _preload_backend_quietly("sim")
+        _preload_pybullet_quietly()
         runner = Runner(opts)
         runner.prepare()
         _CURRENT_LOG[0] = log_path
