@@ -332,7 +332,6 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namespace | None,
          argv: Sequence[str]) -> int:
-    from mmexec.executive.config import load_config
     from mmexec.executive.runner import RunOptions, Runner
 
     params: dict[str, Any] = {}
