@@ -389,7 +389,7 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     name = f"item_{marker}"
     T_item, size = _item_pose_and_size(prof, T_am_marker)
     poses = grasp_poses(T_am_marker, ws.kin.approach_axis, pre_grasp=prof.pre_grasp, grasp_depth=prof.grasp_depth,
-                        retract=prof.retract)
+                        retract=prof.retract, grasp_height=prof.grasp_height)
     q, seeds, boxes = _q(ctx), _ik_seeds(ctx, ws, poses.pre_grasp), ctx.robot.scene
 
     def plan_pre_grasp() -> PlanResult:
@@ -491,7 +491,8 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     base = ctx.robot.base
     bp = base.state().pose if base is not None else None
     T_map_place = _place_frame(prof.depot.place, (bp.x, bp.y) if bp is not None else (0.0, 0.0))
-    poses = place_poses(T_am @ T_map_place, ws.kin.approach_axis, retract=prof.place_retract)
+    poses = place_poses(T_am @ T_map_place, ws.kin.approach_axis, retract=prof.place_retract,
+                        grasp_height=prof.grasp_height)
     q, seeds, boxes = _q(ctx), _ik_seeds(ctx, ws, poses.place), ctx.robot.scene
 
     def plan_place() -> PlanResult:

@@ -146,8 +146,13 @@ class FetchProfile:
     ``approach_distances`` stand-off distances from the marker face tried in order (the
     base-recovery indexes them); ``search_locations`` [x, y, theta] poses in map visited
     in order; ``grasp_depth`` how far behind the marker face the grasp point lies;
+    ``grasp_height`` how far above the marker centre (along the marker's y, up) the pick
+    and place poses lie: a gripper body thicker than the box is tall grasps the box's
+    upper part so the body clears the board the box stands on;
     ``pre_grasp``, ``retract`` and ``place_retract`` offsets in the marker / place frame;
-    ``grasp_force`` [N]; ``back_off`` [m] the base backs away after a pick; ``min_held_width`` [m]: a closed gripper narrower than this
+    ``refine_at`` the base's stand-off from the marker face [m] where ``approach`` looks
+    again when the estimate was seen from afar (a wrist camera ahead of the base needs it
+    farther than a head camera does); ``grasp_force`` [N]; ``back_off`` [m] the base backs away after a pick; ``min_held_width`` [m]: a closed gripper narrower than this
     holds nothing."""
 
     depot: DepotSettings
@@ -160,6 +165,8 @@ class FetchProfile:
     settle_time: float = 0.2
     detect_frames: int = 3
     grasp_depth: float = 0.03
+    grasp_height: float = 0.0
+    refine_at: float = 0.8
     pre_grasp: tuple[float, float, float] = (0.0, 0.0, 0.10)
     retract: tuple[float, float, float] = (0.0, 0.10, 0.10)
     place_retract: tuple[float, float, float] = (0.0, 0.0, 0.10)
@@ -177,8 +184,13 @@ class FetchProfile:
             out.append("item_size and marker_length must be > 0 m")
         if not 1.0 <= self.search_step_deg <= 180.0:
             out.append(f"search_step_deg: expected 1..180, got {self.search_step_deg}")
+        if self.refine_at <= 0:
+            out.append(f"refine_at: expected > 0 m, got {self.refine_at:g}")
         if self.detect_frames < 1:
             out.append("detect_frames: expected >= 1")
+        if not abs(self.grasp_height) < self.item_size[2] / 2:
+            out.append(f"grasp_height: expected less than half the item's height ({self.item_size[2] / 2:g} m) "
+                       f"from its centre, got {self.grasp_height:g} m")
         return out
 
 

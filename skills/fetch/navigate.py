@@ -262,7 +262,8 @@ def navigate(ctx: SkillContext, goal: str | None = None, x: float | None = None,
         Param("timeout", float, unit="s", doc="fail after this much clock time"),
         Param("refine_from", float, unit="m", default=0.95,
               doc="when the estimate was seen from farther than this, re-estimate it on the way"),
-        Param("refine_at", float, unit="m", default=0.8, doc="distance of that intermediate viewpoint"),
+        Param("refine_at", float, unit="m",
+              doc="stand-off distance of that intermediate viewpoint (default: profile fetch.refine_at)"),
     ],
     outputs=[
         Output("pose", list, doc="[x, y, theta] reached, map frame"),
@@ -271,7 +272,7 @@ def navigate(ctx: SkillContext, goal: str | None = None, x: float | None = None,
     needs=("base",),
 )
 def approach(ctx: SkillContext, marker: int, distance: float | None = None, distance_index: int = 0,
-             timeout: float | None = None, refine_from: float = 0.95, refine_at: float = 0.8) -> Gen:
+             timeout: float | None = None, refine_from: float = 0.95, refine_at: float | None = None) -> Gen:
     """Reach a stand-off pose at ``distance`` from the marker along its outward normal,
     facing it (small angular offsets around the normal are tried when the straight one
     is blocked). PLANNING failure when no stand-off is free or reachable."""
@@ -289,6 +290,8 @@ def approach(ctx: SkillContext, marker: int, distance: float | None = None, dist
     assert base is not None
     cm = costmap(ctx)
     limit = timeout if timeout is not None else prof.nav.timeout
+    if refine_at is None:
+        refine_at = prof.refine_at
     if est.distance > refine_from and ctx.robot.camera is not None:
         # a marker's orientation seen from afar is poor (degrees of error at 1.5 m): stop
         # at an intermediate stand-off on the way, look again, then aim at the final one

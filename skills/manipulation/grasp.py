@@ -20,6 +20,15 @@ Seed offsets (positions of the tool frame origin in the marker frame, metres):
 * place: the place frame (a marker-like frame at the depot, z towards the robot) with
   the same tool orientation; retract after placing ``(0, 0, 0.10)``.
 
+Grasp height: ``grasp_height`` [m] moves every pose of the pick (pre-grasp, grasp,
+retract) and of the place along the marker's y (up), so the approach stays a straight
+line along the face normal and the item is released with its centre where it was asked
+for. A gripper whose body, seen along the approach, reaches lower than half the box
+height (a Robotiq 2F-85: a 65 mm thick body and a 75 mm coupling against a 60 mm box)
+would drive into the board the box stands on when grasping at the box centre; raised by
+``grasp_height`` it closes its horizontal fingers on the upper part of the box's side
+faces and its body clears the board. 0 grasps at the marker centre (the seed's poses).
+
 Tool frames: the WX250s ``ee_gripper_link`` approaches along its x axis with the fingers
 moving along y; the UR TCP approaches along z with the Robotiq fingers along y. The
 orientation chosen puts the finger travel horizontal (along the marker's x) so the
@@ -87,16 +96,19 @@ def grasp_poses(
     pre_grasp: Sequence[float] = (0.0, 0.0, 0.10),
     grasp_depth: float = 0.0,
     retract: Sequence[float] = (0.0, -0.10, 0.10),
+    grasp_height: float = 0.0,
 ) -> GraspPoses:
     """Pre-grasp, grasp and retract tool poses for the marker at ``T_frame_marker`` (any
     parent frame: map, arm base). Offsets in metres in the marker frame; ``grasp_depth``
-    [m] moves the grasp point behind the face (into the box)."""
+    [m] moves the grasp point behind the face (into the box); ``grasp_height`` [m] moves
+    all three poses along the marker's y (up)."""
     T_fm = np.asarray(T_frame_marker, dtype=float)
     R = tool_rotation_in_marker(approach_axis)
+    up = np.array([0.0, grasp_height, 0.0])
     return GraspPoses(
-        pre_grasp=T_fm @ _pose(R, pre_grasp),
-        grasp=T_fm @ _pose(R, (0.0, 0.0, -grasp_depth)),
-        retract=T_fm @ _pose(R, retract),
+        pre_grasp=T_fm @ _pose(R, np.asarray(pre_grasp, dtype=float) + up),
+        grasp=T_fm @ _pose(R, np.array([0.0, 0.0, -grasp_depth]) + up),
+        retract=T_fm @ _pose(R, np.asarray(retract, dtype=float) + up),
     )
 
 
@@ -105,9 +117,13 @@ def place_poses(
     approach_axis: int,
     *,
     retract: Sequence[float] = (0.0, 0.0, 0.10),
+    grasp_height: float = 0.0,
 ) -> PlacePoses:
     """Place and post-place retract tool poses for the place frame ``T_frame_place``
-    (marker convention: z towards the robot)."""
+    (marker convention: z towards the robot). ``grasp_height`` [m]: how far above the
+    item's centre it was grasped; both poses move up by it, so the item's centre is
+    released at the place frame's origin."""
     T_fp = np.asarray(T_frame_place, dtype=float)
     R = tool_rotation_in_marker(approach_axis)
-    return PlacePoses(place=T_fp @ _pose(R, (0.0, 0.0, 0.0)), retract=T_fp @ _pose(R, retract))
+    up = np.array([0.0, grasp_height, 0.0])
+    return PlacePoses(place=T_fp @ _pose(R, up), retract=T_fp @ _pose(R, np.asarray(retract, dtype=float) + up))
