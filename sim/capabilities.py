@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -417,7 +418,10 @@ class SimGripper(Gripper):
     """Two prismatic pads under position control with a force limit.
 
     A move succeeds when the pads stop: at the width (``AT_POSITION``) or early while
-    closing with contact on both pads (``CONTACT_CLOSING``). An item is held only then:
+    closing with contact on both pads (``CONTACT_CLOSING``). Stopped means stalled: the
+    width has changed by less than ``stall_progress`` [m] over the last ``stall_window``
+    [s of sim time] while the commanded width runs ahead of the pads (or has reached the
+    target). Pads pressing on an item jitter at a few mm/s, so their speed is no test. An item is held only then:
     a fixed constraint to the tool frame carries it, with a strength from the friction
     the pads can produce (``mu * force``). Grasped off-centre (item centre more than
     ``slip_offset`` from the pad centre along the fingers) the hold is weaker than the
@@ -426,6 +430,8 @@ class SimGripper(Gripper):
 
     friction = 0.8
     slip_offset = 0.02  # m
+    stall_window = 0.1  # s of sim time
+    stall_progress = 5e-4  # m of width change within stall_window
 
     def __init__(self, core: SimCore) -> None:
         self._c = core
@@ -440,7 +446,7 @@ class SimGripper(Gripper):
         self._speed = info.gripper_speed
         self._force = self.max_force
         self._closing = False
-        self._still = 0
+        self._widths: deque[tuple[float, float]] = deque()  # (sim time [s], width [m]) of this move
         self._grasp = GraspState.AT_POSITION
         self.held: str | None = None
         self._cons: int | None = None
@@ -480,7 +486,7 @@ class SimGripper(Gripper):
         self._cmd = cur
         self._speed = min(speed, self._c.info.gripper_speed)
         self._force = min(force, self.max_force)
-        self._still = 0
+        self._widths.clear()
         self._grasp = GraspState.MOVING
         self._goal = Goal("gripper.move", on_cancel=self._on_cancel)
         return self._goal
@@ -559,13 +565,12 @@ class SimGripper(Gripper):
         st = p.getJointStates(c.body, self._idx, physicsClientId=c.cid)
         moving = abs(st[0][1]) + abs(st[1][1]) > 1e-3
         width = c.info.q_to_width(st[0][0], st[1][0])
-        self._still = 0 if moving else self._still + 1
         at_cmd_end = abs(self._cmd - self._target) < 1e-9
         if abs(width - self._target) < 1e-3 and at_cmd_end and not moving:
             self._grasp = GraspState.AT_POSITION
             goal.succeed(self.state())
             return
-        if self._still < max(3, int(0.05 * c.clock.hz)):
+        if not self._stalled(c.clock.now(), width):
             return
         if self._closing and width > self._target + 1e-3 and (at_cmd_end or self._cmd < width - 2e-3):
             left, right = self._contacts()
@@ -582,6 +587,20 @@ class SimGripper(Gripper):
         elif not self._closing and at_cmd_end:
             self._grasp = GraspState.AT_POSITION
             goal.succeed(self.state())
+
+    def _stalled(self, now: float, width: float) -> bool:
+        """Record the width [m] at sim time ``now`` [s]; True once the record spans
+        ``stall_window`` (and at least 3 steps) and the width moved less than
+        ``stall_progress`` over it."""
+        w = self._widths
+        w.append((now, width))
+        while len(w) > 3 and now - w[1][0] >= self.stall_window:
+            w.popleft()
+        if len(w) < 3 or now - w[0][0] < self.stall_window - 1e-9:
+            return False
+        lo = min(x for _, x in w)
+        hi = max(x for _, x in w)
+        return hi - lo < self.stall_progress
 
     def _check_hold(self) -> None:
         c = self._c
