@@ -152,7 +152,9 @@ class FetchProfile:
     ``pre_grasp``, ``retract`` and ``place_retract`` offsets in the marker / place frame;
     ``refine_at`` the base's stand-off from the marker face [m] where ``approach`` looks
     again when the estimate was seen from afar (a wrist camera ahead of the base needs it
-    farther than a head camera does); ``grasp_force`` [N]; ``back_off`` [m] the base backs away after a pick; ``min_held_width`` [m]: a closed gripper narrower than this
+    farther than a head camera does); ``redetect_at_standoff``: ``approach`` looks at the
+    marker once more from the stand-off pose it reached and keeps that estimate for the
+    pick (a wrist camera in its look pose is then closest to the marker); ``grasp_force`` [N]; ``back_off`` [m] the base backs away after a pick; ``min_held_width`` [m]: a closed gripper narrower than this
     holds nothing."""
 
     depot: DepotSettings
@@ -167,6 +169,7 @@ class FetchProfile:
     grasp_depth: float = 0.03
     grasp_height: float = 0.0
     refine_at: float = 0.8
+    redetect_at_standoff: bool = False
     pre_grasp: tuple[float, float, float] = (0.0, 0.0, 0.10)
     retract: tuple[float, float, float] = (0.0, 0.10, 0.10)
     place_retract: tuple[float, float, float] = (0.0, 0.0, 0.10)

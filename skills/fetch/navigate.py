@@ -316,4 +316,13 @@ def approach(ctx: SkillContext, marker: int, distance: float | None = None, dist
                                                                 round(found.pose.theta, 3)], node=ctx.node_path)
     path = simplify_path(cm, found.path) if found.path else None
     reached = yield from drive_path(ctx, found.pose, f"marker {marker} stand-off", timeout=limit, path=path)
+    if prof.redetect_at_standoff and ctx.robot.camera is not None:
+        # the closest view before the pick: the grasp is planned from this estimate
+        near = yield from look(ctx, marker, prof.detect_frames)
+        if near is None:
+            log.warning("marker %d not in view from its stand-off; the pick uses the estimate from %.2f m",
+                        marker, est.distance)
+        else:
+            ctx.emit("marker_estimate", marker=marker, pose=[round(v, 4) for v in near.as_list()],
+                     samples=near.samples, distance=round(near.distance, 3), node=ctx.node_path)
     return {"pose": [reached.x, reached.y, reached.theta], "distance": distance}

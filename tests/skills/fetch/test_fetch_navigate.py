@@ -141,3 +141,24 @@ def test_approach_reestimates_a_far_marker_on_the_way(fetch_robot, fetch_ctx):
     assert fetch_robot.camera.headings  # it looked again from the intermediate viewpoint
     end = fetch_robot.base.pose
     assert end.distance_to(Pose2D(4.8, 1.0, 0.0)) < 0.06  # the stand-off of the true marker
+
+
+@pytest.mark.parametrize("redetect", [True, False])
+def test_approach_redetects_from_the_standoff_when_the_profile_asks(fetch_robot, fetch_ctx, redetect):
+    T_true = marker_pose(5.3, 1.0, 0.5, math.pi)
+    fetch_robot.camera.markers = {7: T_true}
+    T_off = T_true.copy()
+    T_off[1, 3] += 0.03  # seen from 0.9 m (no intermediate look): 3 cm off sideways
+    _estimate(fetch_ctx, 7, T_off, distance=0.9)
+    fetch_robot.profile["fetch"]["redetect_at_standoff"] = redetect
+    run = run_skill(fetch_ctx, "approach", {"marker": 7, "distance": 0.5})
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    est = fetch_ctx.world[WORLD_MARKERS][7]
+    err = np.linalg.norm(est.T_map_marker[:3, 3] - T_true[:3, 3])
+    looks = events_of(fetch_ctx, "marker_estimate")
+    if redetect:
+        assert err < 0.01, f"estimate still {err * 1e3:.0f} mm off"
+        assert len(looks) == 1 and looks[0]["distance"] < 0.6
+    else:
+        assert err == pytest.approx(0.03)
+        assert looks == []
