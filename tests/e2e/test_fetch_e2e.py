@@ -153,3 +153,15 @@ def test_blocked_standoff_uses_the_approach_distance_recovery(tmp_path: Path) ->
     assert _at_home(run, 1)
     _assert_delivered(run, 2, "box_5")
     assert math.isfinite(run.results[0].duration)
+
+
+def test_arm_failing_before_the_approach_ran_is_recovered(tmp_path: Path) -> None:
+    """The first arm goal of the run (the look pose, before any approach) fails: case 1
+    still recovers (its guard treats "approach never ran" as "approach did not give up")."""
+    run = run_fetch(tmp_path, [3], start=FACING_FAR_SHELF, faults="{arm_fail_attempts: [1]}")
+    assert _outcomes(run) == ["success"], run.out
+    case1 = run.recoveries("fetch_item/pick_item")
+    assert len(case1) == 1 and run.results[0].recoveries == 1, run.out
+    assert _skills_started(run, "approach", request=1)[0]["t"] >= case1[0]["t"]  # failed before approaching
+    assert [f for _, f in run.truth[0].faults_fired if "arm_fail" in f] != []
+    _assert_delivered(run, 1, "box_3")
