@@ -146,8 +146,10 @@ class PlanningScene:
             return self._cid
         cid = p.connect(p.DIRECT)
         self._cid = cid
-        # report only real contacts and near misses within 1 mm (fewer points to filter)
-        p.setPhysicsEngineParameter(contactBreakingThreshold=0.001, physicsClientId=cid)
+        # No contactBreakingThreshold here: Bullet keeps it in a process-wide global
+        # (gContactBreakingThreshold), so setting it on this client changed contact
+        # handling in the simulator's client too (the sim's pads sank into boxes with
+        # 1 mm). Near misses beyond the tolerance are filtered in _contacts instead.
         try:
             self._load_robot()
         except Exception:
