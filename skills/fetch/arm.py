@@ -53,6 +53,7 @@ from mmexec.skills.manipulation import (
     ArmPlanner,
     PlannerConfig,
     PlanningScene,
+    PlacePoses,
     PlanResult,
     grasp_poses,
     place_poses,
@@ -74,6 +75,11 @@ R = TypeVar("R")
 #: the support it was lifted from (touching it, give or take the marker estimate's error)
 #: does not count as a collision at the start of the retract.
 HELD_CLEARANCE = 0.005
+
+#: [m] release heights above the profile's place pose, tried in order: a held item that
+#: sits a little off its planned hold can have no collision-free IK at the nominal height
+#: (the basket wall, the robot's own body) and is then dropped from a little higher.
+PLACE_RAISES = (0.0, 0.05, 0.10)
 
 
 @dataclass
@@ -491,15 +497,32 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     base = ctx.robot.base
     bp = base.state().pose if base is not None else None
     T_map_place = _place_frame(prof.depot.place, (bp.x, bp.y) if bp is not None else (0.0, 0.0))
-    poses = place_poses(T_am @ T_map_place, ws.kin.approach_axis, retract=prof.place_retract,
-                        grasp_height=prof.grasp_height)
-    q, seeds, boxes = _q(ctx), _ik_seeds(ctx, ws, poses.place), ctx.robot.scene
+    # the nominal release height first; when the held item (not always held exactly as
+    # planned) has no collision-free IK there, release it a little higher above the basket
+    candidates: list[tuple[float, PlacePoses]] = []
+    for raise_by in PLACE_RAISES:
+        T = T_map_place.copy()
+        T[2, 3] += raise_by
+        candidates.append((raise_by, place_poses(T_am @ T, ws.kin.approach_axis, retract=prof.place_retract,
+                                                 grasp_height=prof.grasp_height)))
+    q, seeds, boxes = _q(ctx), _ik_seeds(ctx, ws, candidates[0][1].place), ctx.robot.scene
+    chosen: list[tuple[float, PlacePoses]] = []
 
     def plan_place() -> PlanResult:
         ws.scene.set_static_boxes(boxes, T_am)
-        return ws.planner.plan_to_pose(q, poses.place, ik_seeds=seeds, config=cfg)
+        res = None
+        for cand in candidates:
+            res = ws.planner.plan_to_pose(q, cand[1].place, ik_seeds=seeds, config=cfg)
+            if res.success:
+                chosen.append(cand)
+                break
+        assert res is not None
+        return res
 
     res = _planned(ctx, (yield from off_tick(ctx, ws, plan_place)), "place pose")
+    raised, poses = chosen[0]
+    if raised > 0:
+        ctx.emit("place_raised", by=raised, node=ctx.node_path)
     yield from _execute(ctx, res, "place pose")
     yield from _gripper(ctx, None, prof.grasp_force)
     q = _q(ctx)

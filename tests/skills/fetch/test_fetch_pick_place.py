@@ -111,3 +111,43 @@ def test_pick_out_of_reach_is_a_planning_failure(arm_robot, fetch_ctx):
     assert run.status is SkillStatus.FAILURE
     assert run.failure.kind is FailureKind.PLANNING and run.failure.reason.startswith("pre-grasp: ")
     assert arm_robot.arm.moves == 0
+
+
+def test_place_releases_higher_when_the_nominal_pose_is_blocked(arm_robot, fetch_ctx):
+    """A slab where the held item would be released at the nominal place pose (profile
+    depot.place = (1.0, 4.45, 0.25)): place plans the next height of PLACE_RAISES instead
+    of failing, and says so in the log."""
+    import numpy as np
+
+    from mmexec.drivers.interfaces import SceneBox
+    from mmexec.skills.fetch.arm import PLACE_RAISES
+
+    _perceive(fetch_ctx, arm_robot)
+    assert run_skill(fetch_ctx, "pick", {"marker": 7}).status is SkillStatus.SUCCESS
+    arm_robot.base.pose = Pose2D(1.0, 4.0, math.pi / 2)
+    T = np.eye(4)
+    T[:3, 3] = (1.0, 4.45, 0.25)
+    arm_robot.scene = [*arm_robot.scene, SceneBox("slab", T, (0.10, 0.10, 0.02))]
+    fetch_ctx.events.clear()
+    run = run_skill(fetch_ctx, "place")
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    raised = events_of(fetch_ctx, "place_raised")
+    assert len(raised) == 1 and raised[0]["by"] in PLACE_RAISES[1:]
+
+
+def test_place_fails_planning_when_every_release_height_is_blocked(arm_robot, fetch_ctx):
+    import numpy as np
+
+    from mmexec.drivers.interfaces import SceneBox
+    from mmexec.skills.fetch.arm import PLACE_RAISES
+
+    _perceive(fetch_ctx, arm_robot)
+    assert run_skill(fetch_ctx, "pick", {"marker": 7}).status is SkillStatus.SUCCESS
+    arm_robot.base.pose = Pose2D(1.0, 4.0, math.pi / 2)
+    T = np.eye(4)
+    T[:3, 3] = (1.0, 4.45, 0.25 + PLACE_RAISES[-1] / 2)
+    arm_robot.scene = [*arm_robot.scene, SceneBox("column", T, (0.10, 0.10, PLACE_RAISES[-1] + 0.10))]
+    run = run_skill(fetch_ctx, "place")
+    assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.PLANNING
+    assert run.failure.reason.startswith("place pose:"), run.failure.reason
+    assert not events_of(fetch_ctx, "place_raised")
