@@ -70,7 +70,10 @@ STOPPED_W = 1e-3
 class NavSettings:
     """Base motion: speed limits [m/s, rad/s], accelerations [m/s^2, rad/s^2], extra
     inflation ``margin`` [m] on top of the base radius, goal tolerances [m, rad], pure
-    pursuit ``lookahead`` [m] and the default navigation ``timeout`` [clock s]."""
+    pursuit ``lookahead`` [m], the default navigation ``timeout`` [clock s] and
+    ``goal_search`` [m]: a goal that an obstacle covers (in the inflated map) is moved to
+    the nearest free point within this distance, like a global planner's goal tolerance
+    (0: fail instead)."""
 
     max_v: float = 0.5
     max_w: float = 1.5
@@ -81,6 +84,7 @@ class NavSettings:
     heading_tolerance: float = 0.04
     lookahead: float = 0.35
     timeout: float = 90.0
+    goal_search: float = 0.3
 
     def validate(self) -> list[str]:
         bad = [n for n in ("max_v", "max_w", "accel_v", "accel_w", "goal_tolerance", "heading_tolerance",
@@ -88,6 +92,8 @@ class NavSettings:
         out = [f"{n}: must be > 0" for n in bad]
         if self.margin < 0:
             out.append("margin: must be >= 0 m")
+        if self.goal_search < 0:
+            out.append("goal_search: must be >= 0 m")
         return out
 
 

@@ -97,11 +97,22 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
     cm = costmap(ctx)
     start = base.state().pose
     if path is None:
+        search = fetch_profile(ctx).nav.goal_search if "fetch" in ctx.profile else 0.0
+        free = cm.nearest_free(goal.x, goal.y, search) if search > 0 else None
+        if free is not None and (free[0], free[1]) != (goal.x, goal.y):
+            moved = Pose2D(free[0], free[1], goal.theta)
+            log.info("%s: goal (%.2f, %.2f) is in collision; using (%.2f, %.2f), %.2f m away",
+                     label, goal.x, goal.y, moved.x, moved.y, goal.distance_to(moved))
+            ctx.emit("goal_adjusted", label=label, goal=[round(goal.x, 3), round(goal.y, 3)],
+                     used=[round(moved.x, 3), round(moved.y, 3)], shift=round(goal.distance_to(moved), 3),
+                     node=ctx.node_path)
+            goal = moved
         if not cm.is_free(goal.x, goal.y):
             base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="goal in collision")
             base_status(ctx, "idle")
             raise SkillFailure(FailureKind.PLANNING,
-                               f"no path to {label}: goal ({goal.x:.2f}, {goal.y:.2f}) is in collision or off the map")
+                               f"no path to {label}: goal ({goal.x:.2f}, {goal.y:.2f}) is in collision or off the map"
+                               + (f", and no free point lies within {search:g} m" if search > 0 else ""))
         path = plan_path(cm, (start.x, start.y), (goal.x, goal.y))
         if path is None:
             base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="no path")

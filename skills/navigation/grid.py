@@ -203,6 +203,31 @@ class CostMap:
         r, c = world_to_cell(self.grid, x, y)
         return self.in_bounds(r, c) and not bool(self.blocked[r, c])
 
+    def nearest_free(self, x: float, y: float, max_distance: float) -> tuple[float, float] | None:
+        """The free cell centre [m] nearest to map point ``(x, y)`` within ``max_distance``
+        [m] (``(x, y)`` itself when it is free), or None. Like a global planner's goal
+        tolerance: a named stop that an obstacle now covers is served from just beside it."""
+        if self.is_free(x, y):
+            return (x, y)
+        res = self.resolution
+        r0, c0 = world_to_cell(self.grid, x, y)
+        k = int(math.ceil(max_distance / res))
+        rows = np.arange(max(0, r0 - k), min(self.grid.height, r0 + k + 1))
+        cols = np.arange(max(0, c0 - k), min(self.grid.width, c0 + k + 1))
+        if rows.size == 0 or cols.size == 0:
+            return None
+        rr, cc = np.meshgrid(rows, cols, indexing="ij")
+        o = self.grid.origin
+        gx, gy = (cc + 0.5) * res, (rr + 0.5) * res  # as cell_to_world, for every cell at once
+        cth, sth = math.cos(o.theta), math.sin(o.theta)
+        wx, wy = o.x + cth * gx - sth * gy, o.y + sth * gx + cth * gy
+        d = np.hypot(wx - x, wy - y)
+        ok = ~self.blocked[rr, cc] & (d <= max_distance)
+        if not ok.any():
+            return None
+        i = np.unravel_index(np.argmin(np.where(ok, d, np.inf)), d.shape)
+        return (float(wx[i]), float(wy[i]))
+
     def clearance_at(self, x: float, y: float) -> float:
         """Distance [m] from ``(x, y)``'s cell to the nearest obstacle (0 outside the grid)."""
         r, c = world_to_cell(self.grid, x, y)

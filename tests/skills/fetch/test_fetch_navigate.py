@@ -70,6 +70,29 @@ def test_navigate_goal_in_an_obstacle_is_a_planning_failure(fetch_robot, fetch_c
     assert run.failure.kind is FailureKind.PLANNING and "in collision" in run.failure.reason
 
 
+def test_navigate_goal_in_the_inflation_is_served_from_the_nearest_free_point(fetch_robot, fetch_ctx):
+    """A stop 0.1 m in front of the wall (inside the robot-radius inflation, as a depot
+    stop with a randomised crate beside it): the base drives to the nearest free point
+    within the profile's nav.goal_search (0.3 m) and says so."""
+    fetch_robot.occupancy = room_grid(boxes=[WALL])
+    run = run_skill(fetch_ctx, "navigate", {"x": 2.4, "y": 2.0, "theta": 0.0})
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    [adj] = events_of(fetch_ctx, "goal_adjusted")
+    assert adj["goal"] == [2.4, 2.0] and 0.0 < adj["shift"] <= 0.3
+    end = fetch_robot.base.pose
+    assert end.distance_to(Pose2D(*adj["used"], 0.0)) < 0.06
+    assert end.x < 2.4 and abs(end.y - 2.0) < 0.06  # straight back from the wall, not round it
+
+
+def test_navigate_goal_search_zero_keeps_the_strict_check(fetch_robot, fetch_ctx):
+    fetch_robot.occupancy = room_grid(boxes=[WALL])
+    fetch_robot.profile["fetch"]["nav"] = {"goal_search": 0.0}
+    run = run_skill(fetch_ctx, "navigate", {"x": 2.4, "y": 2.0})
+    assert run.status is SkillStatus.FAILURE
+    assert run.failure.kind is FailureKind.PLANNING and "in collision" in run.failure.reason
+    assert not events_of(fetch_ctx, "goal_adjusted")
+
+
 def test_navigate_base_fault_is_an_execution_failure(fetch_robot, fetch_ctx):
     fetch_robot.base.blocked = True
     run = run_skill(fetch_ctx, "navigate", {"x": 3.0, "y": 1.0})

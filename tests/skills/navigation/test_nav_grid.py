@@ -116,3 +116,32 @@ def test_load_map_errors_name_file_line_col(tmp_path):
     with pytest.raises(InputError) as e:
         load_map(p)
     assert "bad.pgm:1:1: not a PGM image" in str(e.value)
+
+
+@pytest.mark.parametrize("theta", [0.0, 0.4])
+def test_nearest_free_matches_a_brute_force_search(theta):
+    """CostMap.nearest_free returns the closest free cell centre within the distance
+    (origin rotated too), the point itself when free, None when nothing is near."""
+    data = np.zeros((40, 40), np.int8)
+    data[15:25, 15:25] = 100
+    grid = OccupancyGrid(data, 0.05, Pose2D(-0.3, 0.7, theta))
+    cm = inflate(grid, 0.1)
+    centre = cell_to_world(grid, 20, 20)
+    edge = cell_to_world(grid, 20, 13)  # in the inflation, 2 cells outside the obstacle
+    for x, y, dmax in [(*centre, 0.5), (*edge, 0.3), (*edge, 0.04)]:
+        best, best_d = None, math.inf
+        for r in range(grid.height):
+            for c in range(grid.width):
+                wx, wy = cell_to_world(grid, r, c)
+                d = math.hypot(wx - x, wy - y)
+                if not cm.blocked[r, c] and d <= dmax and d < best_d - 1e-12:
+                    best, best_d = (wx, wy), d
+        got = cm.nearest_free(x, y, dmax)
+        if best is None:
+            assert got is None
+        else:
+            assert got is not None and cm.is_free(*got)
+            assert math.hypot(got[0] - x, got[1] - y) == pytest.approx(best_d, abs=1e-9)
+    free = cell_to_world(grid, 2, 2)
+    assert cm.nearest_free(free[0], free[1], 0.3) == free
+    assert cm.nearest_free(*centre, 0.2) is None  # the obstacle is 0.25 m deep plus 0.1 m inflation
