@@ -90,33 +90,37 @@ class PlanResult:
     attempts: int = 0
 
 
-def _segment_time(delta: np.ndarray, vmax: np.ndarray, amax: np.ndarray) -> float:
-    """Shortest duration [s] of a rest-to-rest move of every joint by ``delta`` together."""
-    T = 0.0
-    for d, v, a in zip(np.abs(delta), vmax, amax):
-        if d <= 0:
-            continue
-        if d <= v * v / a:
-            t = 2.0 * math.sqrt(d / a)
-        else:
-            t = d / v + v / a
-        T = max(T, t)
-    return T
+#: [rad] waypoints where the path turns by more than this (in the joint space scaled by
+#: the velocity limits) are passed at rest; gentler turns (a Cartesian line's dense IK
+#: waypoints, a simplified OMPL path's near-collinear points) are passed at speed.
+MAX_BLEND_TURN = 0.2
+#: share of each joint's acceleration limit kept for the velocity change at a waypoint
+#: passed at speed (the rest is the path's own speed-up and slow-down on the segments
+#: next to it), so the two together stay within the limit.
+BLEND_ACCEL_SHARE = 0.25
 
 
-def _profile(s_t: float, T: float) -> float:
-    """Normalised position in [0, 1] at time ``s_t`` of a symmetric trapezoid of duration T
-    whose acceleration phase lasts T/4 (a time-optimal trapezoid is no longer than this
-    one stretched: peak speed 4/(3T), acceleration 16/(3T^2), both checked by callers)."""
-    ta = T / 4.0
-    vp = 1.0 / (T - ta)
-    a = vp / ta
-    if s_t <= ta:
-        return 0.5 * a * s_t * s_t
-    if s_t <= T - ta:
-        return 0.5 * a * ta * ta + vp * (s_t - ta)
-    r = T - s_t
-    return 1.0 - 0.5 * a * r * r
+def _segment_profile(L: float, v0: float, v1: float, vlim: float, alim: float) -> tuple[float, float, float, float]:
+    """Trapezoid along a segment of length ``L`` from speed ``v0`` to ``v1`` (reachable
+    from each other with ``alim``): (peak speed, accel time, cruise time, decel time)."""
+    vp = min(vlim, math.sqrt(max(0.0, alim * L + 0.5 * (v0 * v0 + v1 * v1))))
+    vp = max(vp, v0, v1)
+    t1 = (vp - v0) / alim
+    t3 = (vp - v1) / alim
+    cruise = L - (vp * vp - v0 * v0) / (2 * alim) - (vp * vp - v1 * v1) / (2 * alim)
+    t2 = max(0.0, cruise) / vp if vp > 0 else 0.0
+    return vp, t1, t2, t3
+
+
+def _segment_distance(t: float, v0: float, vp: float, v1: float, t1: float, t2: float, t3: float, alim: float) -> float:
+    """Distance covered at time ``t`` [s] into the segment's trapezoid."""
+    if t <= t1:
+        return v0 * t + 0.5 * alim * t * t
+    d1 = v0 * t1 + 0.5 * alim * t1 * t1
+    if t <= t1 + t2:
+        return d1 + vp * (t - t1)
+    r = min(t - t1 - t2, t3)
+    return d1 + vp * t2 + vp * r - 0.5 * alim * r * r
 
 
 def time_parametrize(
@@ -130,43 +134,83 @@ def time_parametrize(
     default_acceleration: float = 2.0,
 ) -> JointTrajectory:
     """Time ``path`` (joint waypoints, the first being the current position) into a
-    :class:`JointTrajectory`. Each segment is a rest-to-rest trapezoid (accelerating for a
-    quarter of its time, cruising, decelerating), all joints synchronised, with duration
-    chosen so that no joint exceeds ``velocity_scale`` x its velocity limit nor
-    ``acceleration_scale`` x its acceleration limit (``default_acceleration`` [rad/s^2]
-    where the limit is infinite). Samples every ``sample_period`` [s] at most."""
+    :class:`JointTrajectory` that follows the straight joint-space segments between the
+    waypoints exactly, all joints synchronised, with no joint above ``velocity_scale`` x
+    its velocity limit nor ``acceleration_scale`` x its acceleration limit
+    (``default_acceleration`` [rad/s^2] where the limit is infinite).
+
+    The path speed is one profile over the whole path (the forward-backward pass of
+    time-optimal path parametrisation, for a piecewise-linear path): it starts
+    and ends at rest, is limited per segment by the joints' limits along it, and passes
+    a waypoint at the speed whose velocity change across the corner the joints'
+    acceleration limits absorb between the samples around it; where the path turns by more than
+    ``MAX_BLEND_TURN`` it stops there. So a Cartesian line of dense waypoints runs through
+    at speed instead of stopping at each. Samples every ``sample_period`` [s] at most, and
+    at every waypoint."""
     if len(path) < 2:
         q = tuple(float(x) for x in path[-1]) if path else ()
         if not q:
             raise ValueError("time_parametrize: empty path")
         return JointTrajectory(tuple(joint_names), (sample_period,), (q,))
-    vmax = np.array([lim.velocity for lim in limits]) * velocity_scale
+    vmax = np.array([lim.velocity for lim in limits], dtype=float) * velocity_scale
     amax = np.array([lim.acceleration if math.isfinite(lim.acceleration) else default_acceleration for lim in limits])
     amax = amax * acceleration_scale
+    pts = [np.asarray(path[0], dtype=float)]
+    for q in path[1:]:
+        q = np.asarray(q, dtype=float)
+        if np.any(np.abs(q - pts[-1]) > 1e-12):
+            pts.append(q)
+    if len(pts) < 2:
+        return JointTrajectory(tuple(joint_names), (sample_period,), (tuple(float(x) for x in path[-1]),))
+    deltas = [b - a for a, b in pairwise(pts)]
+    lengths = [float(np.linalg.norm(d)) for d in deltas]
+    dirs = [d / L for d, L in zip(deltas, lengths)]
+    with np.errstate(divide="ignore"):
+        vlims = [float(np.min(np.where(np.abs(u) > 1e-12, vmax / np.abs(u), np.inf))) for u in dirs]
+        alims = [float(np.min(np.where(np.abs(u) > 1e-12, amax / np.abs(u), np.inf))) for u in dirs]
+    # speed limit at each waypoint: 0 at both ends and at sharp turns
+    n = len(pts)
+    vcap = [0.0] * n
+    for k in range(1, n - 1):
+        u0, u1 = dirs[k - 1], dirs[k]
+        s0, s1 = u0 / vmax, u1 / vmax  # directions in the velocity-limit-scaled space
+        cos_turn = float(s0 @ s1 / (np.linalg.norm(s0) * np.linalg.norm(s1)))
+        if math.acos(max(-1.0, min(1.0, cos_turn))) > MAX_BLEND_TURN:
+            continue
+        # the velocity jump v |u1 - u0| spreads over the samples either side of the
+        # waypoint: at least half a sample period apart, or the shorter segment's
+        # traversal time when that is less (dense waypoints)
+        jump = np.abs(u1 - u0)
+        short = min(lengths[k - 1], lengths[k])
+        ab = BLEND_ACCEL_SHARE * amax
+        with np.errstate(divide="ignore"):
+            vj = float(np.min(np.where(jump > 1e-12, np.minimum(0.5 * ab * sample_period / jump,
+                                                                  np.sqrt(ab * short / jump)), np.inf)))
+        vcap[k] = min(vlims[k - 1], vlims[k], vj)
+    # segments touching a waypoint passed at speed leave that share to the corner
+    for k in range(n - 1):
+        if vcap[k] > 0 or vcap[k + 1] > 0:
+            alims[k] *= 1.0 - BLEND_ACCEL_SHARE
+    # forward-backward pass: reachable from the start and able to stop by the end
+    v = vcap[:]
+    for k in range(1, n):
+        v[k] = min(v[k], math.sqrt(v[k - 1] ** 2 + 2 * alims[k - 1] * lengths[k - 1]))
+    for k in range(n - 2, -1, -1):
+        v[k] = min(v[k], math.sqrt(v[k + 1] ** 2 + 2 * alims[k] * lengths[k]))
     times: list[float] = []
     points: list[tuple[float, ...]] = []
     t0 = 0.0
-    for a, b in pairwise(path):
-        qa, qb = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-        delta = qb - qa
-        if not np.any(np.abs(delta) > 1e-12):
-            continue
-        # the quarter-time trapezoid peaks at 4/3 of the mean speed with acceleration
-        # 16/(3 T^2) x delta: choose T so both stay within the limits
-        T = 0.0
-        for d, v, acc in zip(np.abs(delta), vmax, amax):
-            if d > 0:
-                T = max(T, 4.0 * d / (3.0 * v), math.sqrt(16.0 * d / (3.0 * acc)))
-        T = max(T, _segment_time(delta, vmax, amax), 1e-3)
-        n = max(2, math.ceil(T / sample_period))
-        for k in range(1, n + 1):
-            t = T * k / n
-            s = _profile(t, T)
+    for k in range(n - 1):
+        L, a = lengths[k], alims[k]
+        vp, t1, t2, t3 = _segment_profile(L, v[k], v[k + 1], vlims[k], a)
+        T = max(t1 + t2 + t3, 1e-6)
+        m = max(1, math.ceil(T / sample_period - 1e-9))
+        for i in range(1, m + 1):
+            t = T * i / m
+            d = L if i == m else min(L, _segment_distance(t, v[k], vp, v[k + 1], t1, t2, t3, a))
             times.append(t0 + t)
-            points.append(tuple(float(x) for x in qa + s * delta))
+            points.append(tuple(float(x) for x in pts[k] + dirs[k] * d))
         t0 += T
-    if not times:
-        return JointTrajectory(tuple(joint_names), (sample_period,), (tuple(float(x) for x in path[-1]),))
     return JointTrajectory(tuple(joint_names), tuple(times), tuple(points))
 
 

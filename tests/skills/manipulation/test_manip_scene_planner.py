@@ -142,6 +142,44 @@ def test_time_parametrization_respects_velocity_and_acceleration():
     assert tr.duration > 2 * math.sqrt(1.0 / 2.0)
 
 
+
+def _sampled_limits(path, tr):
+    ts = np.array((0.0,) + tr.times)
+    qs = np.array((path[0],) + tr.positions)
+    v = np.diff(qs, axis=0) / np.diff(ts)[:, None]
+    tm = (ts[1:] + ts[:-1]) / 2
+    a = np.diff(v, axis=0) / np.diff(tm)[:, None]
+    return np.abs(v).max(axis=0), np.abs(a).max(axis=0)
+
+
+def test_dense_nearly_straight_path_is_run_through_not_stopped_at_each_waypoint():
+    """A Cartesian line's IK waypoints (here 20 points along a gently curving joint-space
+    arc): one speed profile over the whole path, not 20 rest-to-rest moves, within the
+    velocity and acceleration limits, through every waypoint."""
+    kin = wx250s()
+    s = np.linspace(0.0, 1.0, 21)
+    path = [(0.6 * x, -0.3 * x + 0.02 * math.sin(math.pi * x), 0.25 * x, 0.0, 0.1 * x, 0.0) for x in s]
+    tr = time_parametrize(kin.joint_names, path, kin.limits, velocity_scale=0.5, acceleration_scale=0.5,
+                          sample_period=0.02)
+    def rest_to_rest(a, b):
+        return time_parametrize(kin.joint_names, [a, b], kin.limits, velocity_scale=0.5, acceleration_scale=0.5,
+                                sample_period=0.02).duration
+
+    stop_and_go = sum(rest_to_rest(a, b) for a, b in zip(path, path[1:]))
+    one_move = rest_to_rest(path[0], path[-1])  # the chord: a lower bound
+    assert one_move < tr.duration < 1.5 * one_move
+    assert tr.duration < 0.4 * stop_and_go
+    vmax = np.array([lim.velocity for lim in kin.limits]) * 0.5
+    amax = np.array([lim.acceleration if math.isfinite(lim.acceleration) else 2.0 for lim in kin.limits]) * 0.5
+    v, a = _sampled_limits(path, tr)
+    assert np.all(v <= vmax + 1e-6)
+    assert np.all(a <= amax * 1.1 + 1e-6)
+    for q in path[1:]:
+        assert any(np.allclose(p, q) for p in tr.positions)
+    assert tr.positions[-1] == pytest.approx(path[-1])
+    # ends at rest: the last step is short
+    assert np.abs(np.array(tr.positions[-1]) - np.array(tr.positions[-2])).max() < 0.01
+
 def test_cartesian_line(scene):
     kin = wx250s()
     scene.set_static_boxes([])
