@@ -436,6 +436,14 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
         held_size = (sx, sy, sz)
         ws.scene.add_item(name, held_size, T_item)
         ws.scene.attach_item(name, q_grasp)
+        try:
+            shift = ws.scene.clear_attached_from_static(name, q_grasp)
+        except ValueError as e:  # deeper than estimate error: let the planner report the collision
+            log.info("retract: %s", e)
+        else:
+            if shift > 0:
+                log.info("retract: held %s model moved %.1f mm out of the support it was lifted from",
+                         name, shift * 1e3)
         line = ws.planner.cartesian_path(q_grasp, poses.retract, config=cfg)
         if not line.success and line.reason != CANCELLED:
             # the straight line folds the arm into itself: plan a way instead

@@ -336,6 +336,41 @@ class PlanningScene:
         for s in self._static:
             p.setCollisionFilterPair(it.body, s, -1, -1, 1, physicsClientId=cid)
 
+    def clear_attached_from_static(self, name: str, q: Sequence[float], max_shift: float = 0.02) -> float:
+        """Move attached item ``name``'s model out of the static boxes it penetrates at
+        ``q`` (the grasp): it was modelled from the marker estimate, and a few mm of
+        estimate error put a box lifted off a board into that board, failing the retract's
+        start. Each round pushes it along the deepest contact's normal by the penetration
+        depth (plus 0.5 mm), at most ``max_shift`` [m] in all (like MoveIt's fix-start-
+        state adapter, but only for the held item). Returns the shift applied [m];
+        ValueError when more than ``max_shift`` would be needed (a real collision)."""
+        cid = self._ensure()
+        it = self._item(name)
+        if not it.attached:
+            raise ValueError(f"scene item {name!r} is not attached")
+        T_tool = self.tool_pose(q)
+        total = np.zeros(3)
+        for _ in range(6):
+            pos, orn = pose_to_pb(T_tool @ it.T)
+            p.resetBasePositionAndOrientation(it.body, pos, orn, physicsClientId=cid)
+            p.performCollisionDetection(physicsClientId=cid)
+            deepest = None
+            for s in self._static:
+                for c in p.getContactPoints(bodyA=it.body, bodyB=s, physicsClientId=cid):
+                    if c[8] < -self.contact_tolerance and (deepest is None or c[8] < deepest[8]):
+                        deepest = c
+            if deepest is None:
+                return float(np.linalg.norm(total))
+            step = np.asarray(deepest[7], dtype=float) * (-deepest[8] + 5e-4)  # normal on B points towards A
+            if np.linalg.norm(total + step) > max_shift:
+                raise ValueError(f"held {name} is {-deepest[8] * 1e3:.1f} mm into {self._name(deepest[2], -1)}, "
+                                 f"more than {max_shift * 1e3:.0f} mm of estimate error")
+            total += step
+            T_world = T_tool @ it.T
+            T_world[:3, 3] += step
+            it.T = np.linalg.inv(T_tool) @ T_world
+        raise ValueError(f"held {name} still touches the static scene after {np.linalg.norm(total) * 1e3:.1f} mm")
+
     def detach_item(self, name: str, q: Sequence[float]) -> None:
         """Release item ``name`` where the tool leaves it at ``q``. It stays in the world,
         still ignored by the gripper links (which touch it) until removed."""

@@ -77,6 +77,37 @@ def test_item_add_attach_detach_remove(scene):
     scene.set_static_boxes([])
 
 
+
+@pytest.mark.parametrize("sink,ok", [(0.004, True), (0.03, False)])
+def test_held_item_modelled_into_its_board_is_lifted_out(scene, sink, ok):
+    """A box grasped on a board but modelled ``sink`` lower than it is (marker estimate
+    error): a few mm are estimate error, moved out along the contact normal (up) so the
+    retract can start; 3 cm is a real collision and is left for the planner to report."""
+    kin = wx250s()
+    q_grasp = kin.ik(_tool_at(0.35, 0.0, 0.10), HOME)
+    assert q_grasp is not None
+    T_item = kin.fk(q_grasp)
+    # the board's top is 0.02 below the item centre: a 0.04 m tall item rests on it
+    scene.set_static_boxes([_box("board", (0.35, 0.0, 0.10 - 0.02 - 0.01), (0.3, 0.6, 0.02))])
+    T_model = T_item.copy()
+    T_model[2, 3] -= sink
+    scene.add_item("box8", (0.03, 0.03, 0.04), T_model)
+    scene.attach_item("box8", q_grasp)
+    try:
+        assert not scene.is_valid(q_grasp)
+        if ok:
+            shift = scene.clear_attached_from_static("box8", q_grasp)
+            assert shift == pytest.approx(sink + 5e-4, abs=2e-4)
+            assert scene.is_valid(q_grasp)
+            T_now = scene.tool_pose(q_grasp) @ scene.items["box8"].T
+            assert T_now[:3, 3] == pytest.approx(T_model[:3, 3] + [0.0, 0.0, shift], abs=1e-6)
+        else:
+            with pytest.raises(ValueError, match="mm into board"):
+                scene.clear_attached_from_static("box8", q_grasp)
+    finally:
+        scene.remove_item("box8")
+        scene.set_static_boxes([])
+
 def _tool_at(x, y, z):
     T = np.eye(4)
     T[:3, 3] = (x, y, z)
