@@ -211,7 +211,7 @@ class CostMap:
             return (x, y)
         res = self.resolution
         r0, c0 = world_to_cell(self.grid, x, y)
-        k = int(math.ceil(max_distance / res))
+        k = math.ceil(max_distance / res)
         rows = np.arange(max(0, r0 - k), min(self.grid.height, r0 + k + 1))
         cols = np.arange(max(0, c0 - k), min(self.grid.width, c0 + k + 1))
         if rows.size == 0 or cols.size == 0:

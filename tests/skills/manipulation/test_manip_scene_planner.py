@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -196,7 +197,7 @@ def test_dense_nearly_straight_path_is_run_through_not_stopped_at_each_waypoint(
         return time_parametrize(kin.joint_names, [a, b], kin.limits, velocity_scale=0.5, acceleration_scale=0.5,
                                 sample_period=0.02).duration
 
-    stop_and_go = sum(rest_to_rest(a, b) for a, b in zip(path, path[1:]))
+    stop_and_go = sum(rest_to_rest(a, b) for a, b in itertools.pairwise(path))
     one_move = rest_to_rest(path[0], path[-1])  # the chord: a lower bound
     assert one_move < tr.duration < 1.5 * one_move
     assert tr.duration < 0.4 * stop_and_go
