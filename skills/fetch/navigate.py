@@ -196,12 +196,29 @@ def rotate_by(ctx: SkillContext, angle: float, *, timeout: float = 20.0) -> Gene
 
 
 def back_off(ctx: SkillContext, distance: float, *, speed: float = 0.2, timeout: float = 15.0) -> Generator[None, None, Pose2D]:
-    """Drive straight backwards ``distance`` [m] on odometry (no map check: the base
-    leaves the way it came), within the acceleration limit; brake to rest at the end.
-    EXECUTION failure on a base fault or after ``timeout`` clock seconds."""
+    """Drive straight backwards ``distance`` [m] on odometry, within the acceleration
+    limit; brake to rest at the end. With a map, and starting from a free pose, only as
+    far as the line behind stays free in the inflated map (the base did not necessarily
+    arrive along it: an obstacle beside the stand-off can lie behind it), logged as
+    ``back_off_shortened``. EXECUTION failure on a base fault or after ``timeout`` clock
+    seconds."""
     base = ctx.robot.base
     assert base is not None
     start = base.state().pose
+    if ctx.robot.occupancy is not None and distance > 0:
+        cm = costmap(ctx)
+        if cm.is_free(start.x, start.y):
+            step, free, d = 0.5 * cm.resolution, 0.0, 0.0
+            while d < distance:
+                d = min(distance, d + step)
+                if not cm.is_free(start.x - d * math.cos(start.theta), start.y - d * math.sin(start.theta)):
+                    break
+                free = d
+            if free < distance:
+                ctx.emit("back_off_shortened", asked=round(distance, 3), used=round(free, 3), node=ctx.node_path)
+                distance = free
+    if distance <= 0.005:
+        return start
     t_end = ctx.clock.now() + timeout
     try:
         while True:

@@ -78,8 +78,9 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
            locations: list[Any] | None = None, max_locations: int | None = None, frames: int | None = None,
            settle: float | None = None, timeout: float = 300.0) -> Generator[None, None, dict[str, Any]]:
     """Find marker ``marker``: check the camera; turn clockwise in steps through ``turn``
-    degrees checking at each step; then go to the next search location and repeat.
-    EXECUTION "marker K not found ..." when every location was searched."""
+    degrees checking at each step; then go to the next search location and repeat; a
+    location the planner finds no path to is skipped (``search_skipped``). EXECUTION
+    "marker K not found ..." when every location was searched or skipped."""
     prof = fetch_profile(ctx)
     step_deg = prof.search_step_deg if step is None else step
     if not 1.0 <= step_deg <= 180.0 or not 0.0 <= turn <= 720.0:
@@ -102,10 +103,19 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
         yield from move_named(ctx, look_pose)
     n_steps = math.floor(turn / step_deg + 1e-9)
     stops: list[tuple[Pose2D, str] | None] = [None] + list(locs)
+    skipped: list[str] = []
     for stop in stops:
         if stop is not None:
             pose, label = stop
-            yield from drive_path(ctx, pose, label, timeout=max(1.0, deadline - ctx.clock.now()))
+            try:
+                yield from drive_path(ctx, pose, label, timeout=max(1.0, deadline - ctx.clock.now()))
+            except SkillFailure as e:
+                if e.kind is not FailureKind.PLANNING:
+                    raise
+                # unreachable from here (an obstacle closes the way): search the next one
+                skipped.append(label)
+                ctx.emit("search_skipped", location=label, reason=e.reason, node=ctx.node_path)
+                continue
             progress.locations_visited += 1
         for k in range(n_steps + 1):
             if k > 0:
@@ -125,7 +135,9 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
             if ctx.clock.now() > deadline:
                 raise SkillFailure(FailureKind.EXECUTION,
                                    f"search: marker {marker} not found within {timeout:g} s ({progress.views} views)")
+    unreachable = f" ({len(skipped)} unreachable: {', '.join(skipped)})" if skipped else ""
     raise SkillFailure(FailureKind.EXECUTION,
-                       f"marker {marker} not found: {progress.views} views at {progress.locations_visited + 1} locations")
+                       f"marker {marker} not found: {progress.views} views at {progress.locations_visited + 1} locations"
+                       + unreachable)
 
 

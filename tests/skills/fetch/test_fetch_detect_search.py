@@ -103,6 +103,31 @@ def test_search_not_found_anywhere_fails_after_every_location(fetch_robot, fetch
     assert_headings(fetch_robot.camera.headings, full_turn + full_turn)
 
 
+
+def test_search_skips_a_location_it_has_no_path_to(fetch_robot, fetch_ctx):
+    """The first search location (4, 1) is walled in: no path, so the search goes on to
+    the second (4, 4) instead of failing, and says which one it skipped."""
+    from fetchkit import room_grid
+
+    fetch_robot.occupancy = room_grid(boxes=[(3.3, 0.3, 4.7, 0.45), (3.3, 1.55, 4.7, 1.7),
+                                             (3.3, 0.3, 3.45, 1.7), (4.55, 0.3, 4.7, 1.7)])
+    # visible only from the second location (4, 4), which faces -x there
+    fetch_robot.camera.markers = {6: marker_pose(2.8, 4.0, 0.5, 0.0)}
+    fetch_robot.camera.max_range = 1.5
+    run = run_skill(fetch_ctx, "search", {"marker": 6})
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    [skipped] = events_of(fetch_ctx, "search_skipped")
+    assert skipped["location"] == "search location 1" and "no path" in skipped["reason"]
+    assert fetch_ctx.world[WORLD_SEARCH].locations_visited == 1
+    pose = fetch_robot.base.pose
+    assert abs(pose.x - 4.0) < 0.06 and abs(pose.y - 4.0) < 0.06
+    # and with nothing to find, the failure names the unreachable location
+    fetch_robot.camera.markers = {}
+    fetch_ctx.events.clear()
+    run = run_skill(fetch_ctx, "search", {"marker": 9})
+    assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.EXECUTION
+    assert run.failure.reason.endswith("(1 unreachable: search location 1)"), run.failure.reason
+
 def test_search_step_is_a_parameter(fetch_robot, fetch_ctx):
     fetch_robot.camera.markers = {}
     run = run_skill(fetch_ctx, "search", {"marker": 9, "step": 90.0, "max_locations": 0})

@@ -185,3 +185,37 @@ def test_approach_redetects_from_the_standoff_when_the_profile_asks(fetch_robot,
     else:
         assert err == pytest.approx(0.03)
         assert looks == []
+
+
+def _drive(ctx, gen, period=0.05, max_ticks=2000):
+    """Run a skill-helper generator to its return value, spinning the mock robot."""
+    for _ in range(max_ticks):
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
+        ctx.robot.spin(period)
+    raise AssertionError("helper still running")
+
+
+@pytest.mark.parametrize("behind,expected", [(None, 0.25), (1.0, None)])
+def test_back_off_stays_in_the_free_part_of_the_map(fetch_robot, fetch_ctx, behind, expected):
+    """After a pick the base backs off straight; with an obstacle behind it (not the way it
+    came) it stops where the inflated map stops being free, and logs by how much."""
+    from mmexec.skills.fetch.navigate import back_off
+
+    fetch_robot.base.pose = Pose2D(2.0, 3.0, 0.0)
+    boxes = [] if behind is None else [(1.0, 2.5, 1.2, 3.5)]  # a wall 0.8-1.0 m behind
+    fetch_robot.occupancy = room_grid(boxes=boxes)
+    end = _drive(fetch_ctx, back_off(fetch_ctx, 0.25 if behind is None else 0.9))
+    moved = Pose2D(2.0, 3.0, 0.0).distance_to(end)
+    shortened = events_of(fetch_ctx, "back_off_shortened")
+    if expected is not None:
+        assert moved == pytest.approx(expected, abs=0.01) and not shortened
+    else:
+        [ev] = shortened
+        assert ev["asked"] == 0.9 and 0.0 < ev["used"] < 0.9
+        assert moved == pytest.approx(ev["used"], abs=0.01)
+        from mmexec.skills.fetch.navigate import costmap
+
+        assert costmap(fetch_ctx).is_free(end.x, end.y)
