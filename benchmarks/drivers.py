@@ -38,6 +38,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import dynamixel_sdk as sdk
+
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.bus import BusConfig, DxlBus
 from mmexec.drivers.dynamixel.control_table import (

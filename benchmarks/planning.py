@@ -17,6 +17,7 @@ import statistics
 import sys
 
 import numpy as np
+
 from mmexec.drivers.interfaces import SceneBox
 from mmexec.skills.manipulation.kinematics import wx250s
 from mmexec.skills.manipulation.planner import ArmPlanner, PlannerConfig

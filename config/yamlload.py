@@ -30,12 +30,12 @@ from typing import Any
 import yaml
 
 __all__ = [
-    "InputError",
-    "Mark",
     "MAX_ALIASES",
     "MAX_BYTES",
     "MAX_DEPTH",
     "MAX_NODES",
+    "InputError",
+    "Mark",
     "Problem",
     "Problems",
     "YDict",
@@ -192,8 +192,7 @@ def load_yaml_bytes(data: bytes, name: str = "<string>") -> Any:
 
 def load_yaml_text(text: str, name: str = "<string>") -> Any:
     """Load one YAML document from a string (see module doc). Raises InputError."""
-    if text.startswith("\ufeff"):
-        text = text[1:]
+    text = text.removeprefix("\ufeff")
     for i, ch in enumerate(text):
         if ch == "\x00":
             pos = text[:i]
@@ -233,7 +232,7 @@ def _resolve_plain(value: str) -> str:
 class _Frame:
     """A mapping or sequence being built from the event stream."""
 
-    __slots__ = ("value", "size", "key", "key_mark", "merges", "anchor")
+    __slots__ = ("anchor", "key", "key_mark", "merges", "size", "value")
 
     def __init__(self, value: YDict | YList, anchor: str | None) -> None:
         self.value = value

@@ -332,7 +332,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namespace | None,
          argv: Sequence[str]) -> int:
-    from mmexec.executive.runner import RunOptions, Runner
+    from mmexec.executive.runner import Runner, RunOptions
 
     params: dict[str, Any] = {}
     if args is not None:
@@ -526,7 +526,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("mmexec: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except Exception as e:  # noqa: BLE001 - the documented last-resort boundary of the CLI
+    except Exception as e:  # the documented last-resort boundary of the CLI
         if os.environ.get("MMEXEC_DEBUG"):
             raise
         where = f" (log: {_CURRENT_LOG[0]})" if _CURRENT_LOG[0] else ""

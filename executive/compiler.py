@@ -28,7 +28,14 @@ from typing import Any
 
 from py_trees.common import Status
 
-from mmexec.config.yamlload import InputError, Mark, Problems, did_you_mean, load_yaml_bytes, load_yaml_text
+from mmexec.config.yamlload import (
+    InputError,
+    Mark,
+    Problems,
+    did_you_mean,
+    load_yaml_bytes,
+    load_yaml_text,
+)
 from mmexec.executive import nodes as N
 from mmexec.executive.context import ExecContext
 from mmexec.executive.schema import (

@@ -35,7 +35,7 @@ import logging
 import math
 import os
 from collections.abc import Callable, Iterator
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import IO, Any
 
@@ -152,7 +152,7 @@ class EventLog:
     def wall_time() -> str:
         """Current UTC date-time (ISO 8601) for the ``run_start`` record; identity only,
         never used for timing."""
-        return datetime.now(timezone.utc).isoformat(timespec="seconds")
+        return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def read_log(path: str | Path) -> list[dict[str, Any]]:

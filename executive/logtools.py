@@ -12,7 +12,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Frame", "replay_frames", "render_frame", "summary"]
+__all__ = ["Frame", "render_frame", "replay_frames", "summary"]
 
 #: py_trees' status symbols.
 SYMBOLS = {"SUCCESS": "✓", "FAILURE": "✕", "RUNNING": "*", "INVALID": "-"}

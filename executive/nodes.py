@@ -34,7 +34,14 @@ import py_trees
 from py_trees.common import Status
 
 from mmexec.executive.values import Const, Expr, MissingKey
-from mmexec.skills.base import FailureKind, SkillContext, SkillFailure, SkillRun, SkillSpec, SkillStatus
+from mmexec.skills.base import (
+    FailureKind,
+    SkillContext,
+    SkillFailure,
+    SkillRun,
+    SkillSpec,
+    SkillStatus,
+)
 
 if TYPE_CHECKING:
     from mmexec.executive.context import ExecContext

@@ -45,12 +45,12 @@ from mmexec.executive.eventlog import EventLog
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
 __all__ = [
-    "ArgMark",
-    "BackendStartError",
     "EXIT_FAILED",
     "EXIT_INPUT",
     "EXIT_INTERRUPTED",
     "EXIT_OK",
+    "ArgMark",
+    "BackendStartError",
     "Progress",
     "Request",
     "RequestResult",
@@ -318,7 +318,7 @@ class Runner:
                                              options={"gui": opts.gui, "record": opts.record})
             except InputError:
                 raise
-            except Exception as e:  # noqa: BLE001 - any driver start-up failure, reported in one line
+            except Exception as e:  # any driver start-up failure, reported in one line
                 raise BackendStartError(f"backend {self.config.backend!r} failed to start: "
                                         f"{type(e).__name__}: {e}") from e
             robot = self.robot
@@ -450,7 +450,7 @@ class Runner:
                 elif status in (Status.SUCCESS, Status.FAILURE):
                     break
                 robot.spin(period)
-        except Exception as e:  # noqa: BLE001 - a bug in a skill or node: this request ends, the queue goes on
+        except Exception as e:  # a bug in a skill or node: this request ends, the queue goes on
             log.error("request %d: %s", index, e, exc_info=log.isEnabledFor(logging.DEBUG))
             robot.safe_stop()
             result = RequestResult(index, request, "error", robot.clock.now() - t0, self._recoveries,

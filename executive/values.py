@@ -18,10 +18,10 @@ from collections.abc import Mapping
 from typing import Any
 
 __all__ = [
+    "KEY_RE",
     "Const",
     "DictExpr",
     "Expr",
-    "KEY_RE",
     "ListExpr",
     "MissingKey",
     "ParamRef",

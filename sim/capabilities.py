@@ -34,7 +34,6 @@ from mmexec.drivers.interfaces import (
     CameraIntrinsics,
     Clock,
     Goal,
-    GoalState,
     GraspState,
     Gripper,
     GripperState,

@@ -26,6 +26,7 @@ from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, did_
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, SceneBox
 
 __all__ = [
+    "WORLDS_DIR",
     "Depot",
     "Item",
     "Obstacle",
@@ -36,7 +37,6 @@ __all__ = [
     "Table",
     "World",
     "WorldSpec",
-    "WORLDS_DIR",
     "load_world",
     "shipped_worlds",
 ]

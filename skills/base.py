@@ -32,10 +32,10 @@ from typing import Any, Protocol
 from mmexec.drivers.interfaces import Clock, Goal, GoalState, Robot
 
 __all__ = [
+    "REGISTRY",
     "FailureKind",
     "Output",
     "Param",
-    "REGISTRY",
     "SkillCancelled",
     "SkillContext",
     "SkillFailure",

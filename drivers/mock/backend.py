@@ -24,7 +24,15 @@ from typing import Any, Literal
 
 from mmexec.config.yamlload import Mark, Problems, YDict, bind
 from mmexec.drivers.interfaces import Pose2D
-from mmexec.drivers.mock.robot import DEFAULT_ARM_LIMITS, MockArm, MockBase, MockCamera, MockGripper, MockLidar, MockRobot
+from mmexec.drivers.mock.robot import (
+    DEFAULT_ARM_LIMITS,
+    MockArm,
+    MockBase,
+    MockCamera,
+    MockGripper,
+    MockLidar,
+    MockRobot,
+)
 
 __all__ = ["MockConfig", "build", "parse_section", "robot_from_config"]
 

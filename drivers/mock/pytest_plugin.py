@@ -18,7 +18,6 @@ Kept import-light: the mock package is imported only when a fixture is used.
 from __future__ import annotations
 
 import copy
-
 from collections.abc import Callable, Iterator, Mapping
 from typing import TYPE_CHECKING, Any
 

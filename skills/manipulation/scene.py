@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pybullet as p
+
 from mmexec.drivers.interfaces import SceneBox
 
 __all__ = ["ArmModel", "PlanningScene", "SceneItem", "pb_to_pose", "pose_to_pb"]

@@ -11,6 +11,7 @@ import logging
 import math
 
 import numpy as np
+
 from mmexec.skills.navigation.grid import CostMap, cell_to_world, world_to_cell
 
 __all__ = ["line_is_free", "path_length", "plan_path", "simplify_path"]

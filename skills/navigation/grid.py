@@ -16,6 +16,7 @@ from typing import Literal
 
 import cv2
 import numpy as np
+
 from mmexec.config.yamlload import InputError, Mark, Problems, bind, load_yaml, mark_of
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
 

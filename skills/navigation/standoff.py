@@ -12,6 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.skills.navigation.astar import plan_path
 from mmexec.skills.navigation.grid import CostMap

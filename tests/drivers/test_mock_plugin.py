@@ -4,7 +4,17 @@ installed pytest plugin)."""
 from __future__ import annotations
 
 from mmexec.drivers.mock import MockRobot, run_with_mock
-from mmexec.skills.base import REGISTRY, FailureKind, Output, Param, SkillFailure, SkillRun, SkillStatus, skill, wait_goal
+from mmexec.skills.base import (
+    REGISTRY,
+    FailureKind,
+    Output,
+    Param,
+    SkillFailure,
+    SkillRun,
+    SkillStatus,
+    skill,
+    wait_goal,
+)
 
 REG = REGISTRY.copy()
 

@@ -209,7 +209,7 @@ def test_hw_delegates_or_reports_missing(run_cli, monkeypatch: pytest.MonkeyPatc
 
 
 def test_internal_error_is_one_line_exit_1(run_cli, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    import mmexec.executive.cli as cli
+    from mmexec.executive import cli
 
     def broken(args):
         raise ZeroDivisionError("division by zero\nsecond line")

@@ -9,7 +9,7 @@ import pytest
 
 from mmexec.config.yamlload import InputError, Mark
 from mmexec.executive.eventlog import read_log
-from mmexec.executive.runner import Progress, Request, RunOptions, Runner
+from mmexec.executive.runner import Progress, Request, Runner, RunOptions
 from mmexec.skills.base import REGISTRY, skill
 
 CONFIG = """\

@@ -135,7 +135,7 @@ def test_closing_on_nothing_is_not_a_grasp(robot):
 
 def test_same_seed_same_trajectory(sim_section, bench_world):
     def run(seed):
-        r = build(sim_section(f"world: lab\nrandomize: true\nphysics_hz: 60\n"
+        r = build(sim_section("world: lab\nrandomize: true\nphysics_hz: 60\n"
                               "odometry_noise: {linear: 0.05, angular: 0.05}\n"), profile={}, seed=seed, options={})
         out = []
         for i in range(30):

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pybullet as p
 import pytest
+
 from mmexec.skills.manipulation.kinematics import UR5E_DH, _dh, ur5e, wx250s
 from mmexec.skills.perception.averaging import rotation_angle
 

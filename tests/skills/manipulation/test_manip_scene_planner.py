@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+
 from mmexec.drivers.interfaces import SceneBox
 from mmexec.skills.manipulation.grasp import grasp_poses, place_poses, tool_rotation_in_marker
 from mmexec.skills.manipulation.kinematics import wx250s

@@ -4,6 +4,7 @@ import math
 import time
 
 import numpy as np
+
 from mmexec.drivers.interfaces import OccupancyGrid
 from mmexec.skills.navigation.astar import line_is_free, path_length, plan_path, simplify_path
 from mmexec.skills.navigation.grid import inflate, world_to_cell

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from mmexec.config.yamlload import InputError
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
 from mmexec.skills.navigation.grid import cell_to_world, inflate, load_map, world_to_cell

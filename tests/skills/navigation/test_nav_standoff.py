@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from mmexec.drivers.interfaces import OccupancyGrid
 from mmexec.skills.navigation.grid import inflate
 from mmexec.skills.navigation.standoff import find_standoff, standoff_pose

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
 from mmexec.skills.navigation.astar import plan_path, simplify_path
 from mmexec.skills.navigation.grid import inflate
