@@ -307,8 +307,8 @@ class World:
         r = self.spec.room
         t = r.wall_thickness
         ox, oy = -t, -t
-        w = int(math.ceil((r.size[0] + 2 * t) / resolution))
-        h = int(math.ceil((r.size[1] + 2 * t) / resolution))
+        w = math.ceil((r.size[0] + 2 * t) / resolution)
+        h = math.ceil((r.size[1] + 2 * t) / resolution)
         xs = ox + (np.arange(w) + 0.5) * resolution
         ys = oy + (np.arange(h) + 0.5) * resolution
         X, Y = np.meshgrid(xs, ys)

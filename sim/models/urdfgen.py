@@ -175,7 +175,7 @@ def locobot_wx250s() -> UrdfModel:
     m.link("arm_base_link", (Geom("box", (0.08, 0.08, 0.05), (0.0, 0.0, 0.03), rgba=DARK),), mass=0.4)
     m.joint("arm_base_joint", "fixed", "plate_link", "arm_base_link", (0.097277, 0.0, 0.0095))
     # WX250s arm, LoCoBot variant (waist origin 0.066175)
-    lim = dict(velocity=PI)
+    lim = {"velocity": PI}
     m.link("shoulder_link", (Geom("cylinder", (0.035, 0.03), (0.0, 0.0, 0.02), rgba=DARK),), mass=0.48)
     m.joint("waist", "revolute", "arm_base_link", "shoulder_link", (0.0, 0.0, 0.066175), axis=Z_AXIS,
             lower=-(PI - 1e-5), upper=PI - 1e-5, effort=10.0, **lim)
@@ -259,7 +259,7 @@ def ur5e_robotiq() -> UrdfModel:
     """UR5e (official DH via the ROS description's joint origins) with a Robotiq 2F-85
     (two prismatic pads) and a wrist RGB-D camera, on a differential-drive box base."""
     m = UrdfModel("ur5e_robotiq")
-    bx, by, bz = UR_BASE_SIZE
+    bx, _by, bz = UR_BASE_SIZE
     m.link("base_footprint", (), mass=0.01)
     m.link("mobile_base_link", (Geom("box", UR_BASE_SIZE, (0.0, 0.0, 0.03 + bz / 2), rgba=DARK),),
            mass=30.0, com=(0.0, 0.0, 0.03 + bz / 2))
@@ -274,7 +274,7 @@ def ur5e_robotiq() -> UrdfModel:
     m.joint("arm_mount", "fixed", "mobile_base_link", "base_link", UR_MOUNT)
     m.link("base_link_inertia", (), mass=0.01)
     m.joint("base_link-base_link_inertia", "fixed", "base_link", "base_link_inertia", rpy=(0.0, 0.0, PI))
-    big = dict(velocity=PI, lower=-2 * PI, upper=2 * PI)
+    big = {"velocity": PI, "lower": -2 * PI, "upper": 2 * PI}
     m.link("shoulder_link", (Geom("cylinder", (0.06, 0.12), (0.0, 0.0, -0.02), rgba=BLUE),), mass=3.761)
     m.joint("shoulder_pan_joint", "revolute", "base_link_inertia", "shoulder_link", (0.0, 0.0, 0.1625),
             effort=150.0, **big)

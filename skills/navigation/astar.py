@@ -7,6 +7,7 @@ start cell's centre, the last the goal cell's centre.
 from __future__ import annotations
 
 import heapq
+import itertools
 import logging
 import math
 
@@ -127,7 +128,7 @@ def line_is_free(costmap: CostMap, a: tuple[float, float], b: tuple[float, float
     """True when every cell the segment ``a``-``b`` [m] passes over is free (sampled at a
     quarter cell, so a diagonal cannot slip between two blocked cells)."""
     length = math.hypot(b[0] - a[0], b[1] - a[1])
-    n = max(1, int(math.ceil(length / (costmap.resolution * 0.25))))
+    n = max(1, math.ceil(length / (costmap.resolution * 0.25)))
     grid = costmap.grid
     for k in range(n + 1):
         t = k / n
@@ -162,4 +163,4 @@ def simplify_path(costmap: CostMap, path: list[tuple[float, float]]) -> list[tup
 
 def path_length(path: list[tuple[float, float]]) -> float:
     """Total length [m] of a polyline."""
-    return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(path, path[1:]))
+    return sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in itertools.pairwise(path))

@@ -41,7 +41,7 @@ def world_to_cell(grid: OccupancyGrid, x: float, y: float) -> tuple[int, int]:
     c, s = math.cos(o.theta), math.sin(o.theta)
     gx, gy = c * dx + s * dy, -s * dx + c * dy
     eps = 1e-9  # points on a cell boundary (up to rounding) belong to the upper cell
-    return int(math.floor(gy / grid.resolution + eps)), int(math.floor(gx / grid.resolution + eps))
+    return math.floor(gy / grid.resolution + eps), math.floor(gx / grid.resolution + eps)
 
 
 def cell_to_world(grid: OccupancyGrid, row: int, col: int) -> tuple[float, float]:

@@ -13,6 +13,7 @@ respects ``max_v``/``max_w`` and changes by at most ``accel * dt`` per tick.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -120,7 +121,7 @@ class PathTracker:
         remaining = self.config.lookahead
         # walk along the path from the projection
         pts = [(cx, cy)] + self.path[seg + 1 :]
-        for (x0, y0), (x1, y1) in zip(pts, pts[1:]):
+        for (x0, y0), (x1, y1) in itertools.pairwise(pts):
             L = math.hypot(x1 - x0, y1 - y0)
             if L >= remaining:
                 a = remaining / L if L > 0 else 0.0

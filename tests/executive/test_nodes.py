@@ -127,7 +127,7 @@ def test_retry_counts_attempts(h):
           retry: {skill: flaky, params: {fail_times: 2}}
           attempts: 3
     """)
-    st, n = h.run(t)
+    st, _n = h.run(t)
     assert st is S
     assert [e for _, e in h.journal if e in ("success", "failure")] == ["failure", "failure", "success"]
 

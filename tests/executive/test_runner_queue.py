@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import itertools
 from pathlib import Path
 
 import pytest
@@ -108,7 +109,7 @@ def test_rate_override_changes_clock_step(tmp_path: Path) -> None:
     assert r.run() == 0
     ns = events(tmp_path / "run.jsonl", "node_status")
     ts = sorted({x["t"] for x in ns})
-    assert all(abs(b - a - 0.25) < 1e-9 or b - a > 0.25 for a, b in zip(ts, ts[1:]))
+    assert all(abs(b - a - 0.25) < 1e-9 or b - a > 0.25 for a, b in itertools.pairwise(ts))
     assert r.results[0].duration == pytest.approx(1.0, abs=0.26)
 
 

@@ -148,7 +148,7 @@ def test_same_seed_same_trajectory(sim_section, bench_world):
         return np.array(out), start
     a, sa = run(11)
     b, sb = run(11)
-    c, sc = run(12)
+    c, _sc = run(12)
     assert np.array_equal(a, b) and sa == sb
     assert not np.allclose(a, c)
 

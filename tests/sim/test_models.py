@@ -102,7 +102,7 @@ def test_unknown_model_name_lists_known():
 
 def test_wx250s_zero_pose_in_arm_base(client):
     info = MODEL_INFO["locobot_wx250s"]
-    body, links, joints = _load(client, info.name)
+    body, links, _joints = _load(client, info.name)
     T = np.linalg.inv(_T(client, body, links[info.arm_base_link])) @ _T(client, body, links[info.tool_link])
     assert np.allclose(T[:3, 3], (0.458325, 0.0, 0.354825), atol=1e-3)
     assert np.allclose(T[:3, :3], np.eye(3), atol=1e-6)

@@ -36,7 +36,7 @@ def test_box_face_renders_at_its_metric_depth(robot):
     face_x = robot.truth.item_pose("big")[0, 3] - 0.07
     K = f.intrinsics
     # centre pixel row of the camera (optical axis is horizontal, tilt 0) hits the box face
-    d = float(f.depth[int(round(K.cy)), int(round(K.cx))])
+    d = float(f.depth[round(K.cy), round(K.cx)])
     assert abs(d - (face_x - cam_x)) < 0.01
     assert abs(face_x - cam_x - 1.0) < 0.05  # the world puts it about 1 m away
 

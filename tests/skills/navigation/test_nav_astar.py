@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import itertools
 import math
 import time
 
@@ -15,7 +16,7 @@ def _free(h=20, w=20, res=0.1):
 
 
 def _assert_path_valid(cm, path):
-    for (x0, y0), (x1, y1) in zip(path, path[1:]):
+    for (x0, y0), (x1, y1) in itertools.pairwise(path):
         assert math.hypot(x1 - x0, y1 - y0) <= cm.resolution * math.sqrt(2) + 1e-9
     for x, y in path[1:]:
         assert cm.is_free(x, y)
@@ -96,7 +97,7 @@ def test_simplify_keeps_path_free_and_shortens():
     simple = simplify_path(cm, path)
     assert 2 < len(simple) < len(path)
     assert simple[0] == path[0] and simple[-1] == path[-1]
-    for a, b in zip(simple, simple[1:]):
+    for a, b in itertools.pairwise(simple):
         assert line_is_free(cm, a, b)
     assert path_length(simple) <= path_length(path) + 1e-9
 
