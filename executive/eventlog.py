@@ -37,7 +37,7 @@ import os
 from collections.abc import Callable, Iterator
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, Self
 
 __all__ = ["EventLog", "LogFormatError", "read_log", "to_jsonable"]
 
@@ -90,15 +90,17 @@ class EventLog:
         self._seq = 0
         self._listeners: list[Callable[[dict[str, Any]], None]] = []
 
-    def open(self) -> EventLog:
+    def open(self) -> Self:
         """Create (truncate) the file. Raises OSError if it cannot be created."""
         if self.path is not None and self._fh is None:
             if self.path.parent and not self.path.parent.exists():
                 self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._fh = open(self.path, "w", encoding="utf-8", buffering=1)  # line-buffered
+            # line-buffered; the handle lives as long as this log (closed by close()/__exit__),
+            # so it cannot be a with block here: EventLog itself is the context manager
+            self._fh = open(self.path, "w", encoding="utf-8", buffering=1)  # noqa: SIM115
         return self
 
-    def __enter__(self) -> EventLog:
+    def __enter__(self) -> Self:
         return self.open()
 
     def __exit__(self, *exc: object) -> None:

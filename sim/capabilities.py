@@ -53,6 +53,9 @@ __all__ = ["SimArm", "SimBase", "SimCamera", "SimClock", "SimCore", "SimGripper"
 
 log = logging.getLogger(__name__)
 
+#: Default ``SimCore.true_pose`` (immutable, so one shared instance is fine).
+_ORIGIN = Pose2D()
+
 
 class SimClock(Clock):
     """Simulation time: ``steps / physics_hz`` seconds, advanced only by the backend."""
@@ -89,7 +92,7 @@ class SimCore:
     scene: SceneHandles
     links: dict[str, int] = field(default_factory=dict)
     joints: dict[str, int] = field(default_factory=dict)
-    true_pose: Pose2D = Pose2D()
+    true_pose: Pose2D = _ORIGIN
     held_body: int | None = None
     clearance: ClearanceMap | None = None  #: static-geometry clearance for the base (set by the backend)
     _placed: Pose2D | None = field(default=None, repr=False)

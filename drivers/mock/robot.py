@@ -87,6 +87,9 @@ def _approach(value: float, target: float, max_step: float) -> float:
 
 # --------------------------------------------------------------------------- base
 
+#: Default start pose of :class:`MockBase` (immutable, so one shared instance is fine).
+_ORIGIN = Pose2D()
+
 
 class MockBase(Base):
     """Differential base integrating the commanded (v, w) with acceleration limits.
@@ -96,7 +99,7 @@ class MockBase(Base):
     Poses are in ``map``; the mock's odometry is perfect.
     """
 
-    def __init__(self, clock: ManualClock, *, start: Pose2D = Pose2D(), blocked: bool = False) -> None:
+    def __init__(self, clock: ManualClock, *, start: Pose2D = _ORIGIN, blocked: bool = False) -> None:
         self._clock = clock
         self.pose = start
         self.v = 0.0

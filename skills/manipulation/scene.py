@@ -25,6 +25,7 @@ import logging
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Self
 
 import numpy as np
 import pybullet as p
@@ -127,7 +128,7 @@ class PlanningScene:
         self.checks = 0
 
     # ------------------------------------------------------------------ lifecycle
-    def __enter__(self) -> PlanningScene:
+    def __enter__(self) -> Self:
         self._ensure()
         return self
 

@@ -9,8 +9,10 @@ from mmexec.config.yamlload import InputError
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
 from mmexec.skills.navigation.grid import cell_to_world, inflate, load_map, world_to_cell
 
+_ORIGIN = Pose2D(-1.0, 2.0, 0.0)
 
-def _grid(h=20, w=30, res=0.1, origin=Pose2D(-1.0, 2.0, 0.0)):
+
+def _grid(h=20, w=30, res=0.1, origin=_ORIGIN):
     return OccupancyGrid(np.zeros((h, w), dtype=np.int8), res, origin)
 
 
