@@ -69,7 +69,14 @@ class CapabilityError(RuntimeError):
 
 
 class Clock(abc.ABC):
-    """Time source for everything time-dependent: stepped in sim, monotonic on the robot."""
+    """Time source for everything time-dependent: stepped in sim, monotonic on the robot.
+
+    ``stepped``: True when time moves only when the backend advances it (the simulator,
+    mocks), never while code runs. A skill waiting for off-thread work (planning) may then
+    wait for it in wall time within one tick without the clock moving, which keeps a
+    seeded run exactly reproducible; on a wall clock it must not."""
+
+    stepped: bool = False
 
     @abc.abstractmethod
     def now(self) -> float:
@@ -85,6 +92,8 @@ class MonotonicClock(Clock):
 
 class ManualClock(Clock):
     """A clock that only moves when told to: for mocks, fakes and tests."""
+
+    stepped = True
 
     def __init__(self, start: float = 0.0) -> None:
         self._t = float(start)

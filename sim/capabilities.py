@@ -60,6 +60,8 @@ _ORIGIN = Pose2D()
 class SimClock(Clock):
     """Simulation time: ``steps / physics_hz`` seconds, advanced only by the backend."""
 
+    stepped = True
+
     def __init__(self, physics_hz: int) -> None:
         self.hz = physics_hz
         self.steps = 0

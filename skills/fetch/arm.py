@@ -161,10 +161,25 @@ def off_tick(ctx: SkillContext, ws: ArmWorkspace, job: Callable[[], R]) -> Gener
     ``profile.fetch.arm.plan_slice`` wall seconds for it; returns its result (its
     exception is re-raised here). Cancelled: sets ``planner.stop`` so OMPL, IK and Cartesian loops end
     early, keeps yielding until the job has returned (the scene is never left to a
-    running job), then re-raises."""
+    running job), then re-raises.
+
+    On a stepped clock (sim, mock: :attr:`Clock.stepped`) the first tick waits for the
+    job to finish, however long it takes in wall time (the clock does not move
+    meanwhile), and the result is returned one tick later: planning then costs exactly
+    one tick of clock time whatever the machine's load, so a seeded run is reproducible
+    to the last digit."""
     ws.planner.stop.clear()
     fut = ws.executor.submit(job)
     budget = ws.settings.plan_slice
+    if getattr(ctx.clock, "stepped", False):
+        while not fut.done():
+            futures_wait((fut,), timeout=0.05)  # short waits: signal handlers still run
+        try:
+            yield
+        except SkillCancelled:
+            ws.planner.stop.clear()
+            raise
+        return fut.result()
     try:
         while True:
             # give the worker a bounded slice of this tick (well inside a tick period):
