@@ -107,8 +107,9 @@ class ArmSettings:
     ``carry`` an item, ``look`` with an arm-mounted camera (None: camera not on the arm),
     and ``reach``: the posture that seeds IK for pick and place poses (its yaw joint
     turned towards the target; None: the current posture only). Planning runs on a
-    worker thread; each tick waits at most ``plan_slice`` [wall s] for it (keep it well
-    below the tick period), then yields."""
+    worker thread; on a wall clock each tick waits at most ``plan_slice`` [wall s] for it
+    (keep it well below the tick period), then yields; on a stepped clock (sim, mock) the
+    tick waits for the plan, which costs exactly one tick of clock time."""
 
     model: Literal["locobot_wx250s", "ur5e_robotiq"] = "locobot_wx250s"
     tcp_offset: float = 0.155
