@@ -94,7 +94,9 @@ def convert_value(tp: type, value: Any, what: str) -> Any:
     if tp in (int, float) and isinstance(value, bool):
         raise ValueError(f"{what}: expected {tp.__name__}, got {value!r}")
     if not isinstance(value, tp):
-        raise ValueError(f"{what}: expected {tp.__name__}, got {value!r}")
+        # bad user input, not a programming error: every caller turns ValueError into a
+        # located InputError (exit 2), which a TypeError would bypass
+        raise ValueError(f"{what}: expected {tp.__name__}, got {value!r}")  # noqa: TRY004
     return value
 
 
