@@ -21,7 +21,7 @@ for folder in FOLDERS:
         packages.append(name)
         package_dir[name] = folder + ("/" + sub.replace(".", "/") if sub else "")
 
-DATA = ["*.yaml", "*.yml", "*.urdf", "*.pgm", "*.md", "*.png", "*.json", "**/*.yaml", "**/*.urdf"]
+DATA = ["*.yaml", "*.yml", "*.urdf", "*.pgm", "*.md", "*.png", "*.json", "**/*.yaml", "**/*.urdf", "**/*.pgm"]
 
 setup(
     packages=packages,

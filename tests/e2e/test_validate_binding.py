@@ -4,6 +4,7 @@ do not exist here, so any attempt to open them would fail the validation."""
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -54,6 +55,7 @@ def test_a_robot_without_a_base_is_one_line_per_leaf_and_exit_2(run_cli, repo_ro
     end = text.index("  arm:\n")
     fixed = tmp_path / "ur5e_fixed.yaml"
     fixed.write_text(text[:start] + text[end:])
+    shutil.copytree(repo_root / "config" / "maps", tmp_path / "maps")  # robot.map is relative to the config
     res = run_cli("validate", repo_root / MISSION, "--config", fixed)
     assert res.rc == 2
     lines = res.err.strip().splitlines()
