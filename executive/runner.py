@@ -372,8 +372,11 @@ class Runner:
             return exit_code
         except BaseException as e:
             if self.log is not None and not self.log.closed:
+                # the exit code the command will return for this exception (cli.main)
+                code = (EXIT_INPUT if isinstance(e, InputError)
+                        else EXIT_INTERRUPTED if isinstance(e, KeyboardInterrupt) else EXIT_FAILED)
                 self.log.write("run_end", outcome="error", error=f"{type(e).__name__}: {e}",
-                               served=len(self.results), exit_code=EXIT_FAILED)
+                               served=len(self.results), exit_code=code)
             raise
         finally:
             self.progress.clear()

@@ -235,3 +235,21 @@ def test_progress_line_on_a_terminal(tmp_path: Path) -> None:
     text = screen.getvalue()
     assert "\r[1/1]" in text and "arm_once/move_arm" in text and "\x1b[K" in text
     assert text.endswith("\r\x1b[K")  # cleared at the end
+
+
+@pytest.mark.parametrize("exc,code", [(InputError.at(Mark("config.yaml", 3, 5), "robot.base: no such port"), 2),
+                                      (RuntimeError("driver crashed"), 1)])
+def test_run_end_records_the_exit_code_the_command_returns(tmp_path: Path, exc, code) -> None:
+    """A backend that fails to start: the log's run_end carries the status mmexec exits
+    with (2 for bad input such as a missing port, 1 otherwise), and the error propagates."""
+    m, c = make(tmp_path)
+    r = runner_for(tmp_path, m, c, reqs(7))
+
+    def factory(_loaded):
+        raise exc
+
+    r.robot_factory = factory
+    with pytest.raises((InputError, RuntimeError)):
+        r.run()
+    run_end = events(tmp_path / "run.jsonl", "run_end")[0]
+    assert run_end["outcome"] == "error" and run_end["exit_code"] == code
