@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import shutil
 import tempfile
 from pathlib import Path
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_malformed import corpus_registry
@@ -34,6 +36,14 @@ TOKENS = [b"sequence:", b"fallback:", b"parallel:", b"retry:", b"timeout:", b"re
           b"include: m.yaml", b"max_recoveries: -1", b"policy: 7", b": ", b"1e999", b"~", b"<<: *a"]
 REG = corpus_registry()
 TMP = Path(tempfile.mkdtemp(prefix="mmexec-fuzz-"))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _remove_tmp():
+    """Hypothesis runs many examples per test, so the mission file lives in one module
+    folder rather than a function-scoped tmp_path; remove it when the module is done."""
+    yield
+    shutil.rmtree(TMP, ignore_errors=True)
 
 
 def check(data: bytes) -> None:
