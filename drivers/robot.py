@@ -232,7 +232,17 @@ def _kobuki(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
 
     @dataclass(frozen=True)
     class _Start:
+        """``start``: pose in map at power-up [m, m, rad]; ``footprint_radius`` [m]: the
+        circle covering what the base carries (default: the Kobuki body's 0.178 m)."""
+
         start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        footprint_radius: float | None = None
+
+        def validate(self) -> list[str]:
+            r = self.footprint_radius
+            if r is not None and not KobukiBase.radius <= r <= 2.0:
+                return [f"footprint_radius: expected {KobukiBase.radius}..2.0 m (at least the Kobuki body), got {r}"]
+            return []
 
     cfg_part, start_part = _split(_without(section, "kind"), KobukiConfig, _Start)
     cfg = bind(KobukiConfig, cfg_part, section.mark, path, ctx.problems)
@@ -248,7 +258,7 @@ def _kobuki(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
             raise _connect_error(path, section.mark, str(e)) from e
         ctx.robot.add_closer(f"kobuki on {cfg.port}", dev.close)
         dev.reset_odometry(Pose2D(*start.start))
-        return KobukiBase(dev)
+        return KobukiBase(dev, footprint_radius=start.footprint_radius)
 
     return ("base", f"kobuki on {cfg.port}", section.mark, connect)
 

@@ -28,7 +28,15 @@ class KobukiBase(Base):
 
     radius = 0.178  # m, Kobuki body radius
 
-    def __init__(self, device: KobukiDevice) -> None:
+    def __init__(self, device: KobukiDevice, *, footprint_radius: float | None = None) -> None:
+        """``footprint_radius`` [m]: radius of the circle around the base centre that covers
+        everything the base carries (a larger platform on a Kobuki-protocol base); navigation
+        inflates the map by it. Default: the Kobuki body's 0.178 m; never less than that."""
+        if footprint_radius is not None:
+            if footprint_radius < KobukiBase.radius:
+                raise ValueError(f"footprint_radius {footprint_radius} m is less than the Kobuki body's "
+                                 f"{KobukiBase.radius} m")
+            self.radius = float(footprint_radius)
         self.device = device
         cfg = device.config
         self.max_linear = cfg.max_linear

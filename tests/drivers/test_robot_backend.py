@@ -127,6 +127,29 @@ def test_limit_above_spec_is_positioned(tmp_path: Path) -> None:
         rb.check(load_config(cfg).section())
 
 
+
+def test_footprint_radius_sets_the_base_radius(tmp_path: Path, fake: KobukiFake) -> None:
+    """A larger platform on a Kobuki-protocol base: navigation inflates the map by the
+    configured footprint radius, not the Kobuki body's 0.178 m."""
+    cfg = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}, footprint_radius: 0.405}}\n")
+    robot = build_robot(load_config(cfg))
+    try:
+        assert robot.base is not None and robot.base.radius == pytest.approx(0.405)
+    finally:
+        robot.close()
+    plain = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}}}\n")
+    robot = build_robot(load_config(plain))
+    try:
+        assert robot.base is not None and robot.base.radius == pytest.approx(0.178)
+    finally:
+        robot.close()
+
+
+def test_footprint_radius_below_the_kobuki_body_is_positioned(tmp_path: Path) -> None:
+    cfg = _config(tmp_path, "  base:\n    kind: kobuki\n    footprint_radius: 0.1\n")
+    with pytest.raises(InputError, match=r"run\.yaml:5:5: robot\.base: footprint_radius: expected 0\.178\.\.2\.0 m"):
+        rb.check(load_config(cfg).section())
+
 def test_wx250s_gripper_needs_the_arm(tmp_path: Path) -> None:
     cfg = _config(tmp_path, "  gripper: {kind: wx250s_gripper}\n")
     with pytest.raises(InputError, match="'wx250s_gripper' needs 'arm: {kind: wx250s}'"):

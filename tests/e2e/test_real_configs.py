@@ -126,9 +126,9 @@ def test_home_depot_and_search_locations_are_free_and_connected(repo_root: Path,
     fp = _fetch(loaded)
     robot = robot_backend.build(_map_and_scene_only(loaded.section()), profile={}, seed=None, options={})
     robot.close()  # nothing was opened; the map stays on it
-    # navigate inflates the map by Base.radius (the Kobuki driver's, for both configs)
-    # plus nav.margin; that must cover the platform's footprint as the sim's does
-    radius = KobukiBase.radius
+    # navigate inflates the map by Base.radius (the Kobuki driver's, or the base section's
+    # footprint_radius) plus nav.margin; that must cover the platform's footprint as the sim's does
+    radius = loaded.raw["robot"]["base"].get("footprint_radius", KobukiBase.radius)
     assert radius + fp.nav.margin >= MODEL_INFO[model].footprint_radius + 0.03 - 1e-9
     cm = inflate(robot.occupancy, radius, fp.nav.margin)
     home = tuple(loaded.config.profile["home"])
