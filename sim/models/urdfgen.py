@@ -16,6 +16,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from mmexec.drivers.dynamixel.model import ARM_JOINTS, PAN_TILT
+from mmexec.drivers.ur.model import DH, joint_limits
+
 __all__ = ["Geom", "Joint", "Link", "UrdfModel", "locobot_wx250s", "ur5e_robotiq", "write_all"]
 
 Vec3 = tuple[float, float, float]
@@ -150,6 +153,19 @@ X_AXIS = (1.0, 0.0, 0.0)
 Z_AXIS = (0.0, 0.0, 1.0)
 
 
+def _wx_limits(name: str) -> dict[str, float]:
+    """URDF limits of a WX250s / LoCoBot head joint from the driver's joint table
+    (drivers/dynamixel/model.py), so the sim and the real arm enforce the same ones."""
+    spec = next(j for j in (*ARM_JOINTS, *PAN_TILT) if j.name == name)
+    return {"lower": spec.lower, "upper": spec.upper, "velocity": spec.velocity, "effort": spec.effort}
+
+
+def _ur_limits(model: str) -> dict[str, dict[str, float]]:
+    """URDF limits of the UR joints from the driver's model (drivers/ur/model.py)."""
+    return {lim.name: {"lower": lim.lower, "upper": lim.upper, "velocity": lim.velocity, "effort": lim.effort}
+            for lim in joint_limits(model)}
+
+
 def _kobuki(m: UrdfModel) -> None:
     """Kobuki base: ``base_footprint`` on the floor, ``base_link`` 0.0102 above it."""
     m.link("base_footprint", (), mass=0.01)
@@ -175,33 +191,32 @@ def locobot_wx250s() -> UrdfModel:
     m.link("arm_base_link", (Geom("box", (0.08, 0.08, 0.05), (0.0, 0.0, 0.03), rgba=DARK),), mass=0.4)
     m.joint("arm_base_joint", "fixed", "plate_link", "arm_base_link", (0.097277, 0.0, 0.0095))
     # WX250s arm, LoCoBot variant (waist origin 0.066175)
-    lim = {"velocity": PI}
     m.link("shoulder_link", (Geom("cylinder", (0.035, 0.03), (0.0, 0.0, 0.02), rgba=DARK),), mass=0.48)
     m.joint("waist", "revolute", "arm_base_link", "shoulder_link", (0.0, 0.0, 0.066175), axis=Z_AXIS,
-            lower=-(PI - 1e-5), upper=PI - 1e-5, effort=10.0, **lim)
+            **_wx_limits("waist"))
     m.link("upper_arm_link", (
         Geom("box", (0.035, 0.04, 0.25), (0.025, 0.0, 0.125), rgba=DARK),
     ), mass=0.43, com=(0.025, 0.0, 0.125))
     m.joint("shoulder", "revolute", "shoulder_link", "upper_arm_link", (0.0, 0.0, 0.03865), axis=Y_AXIS,
-            lower=-1.88496, upper=1.98968, effort=20.0, **lim)
+            **_wx_limits("shoulder"))
     m.link("upper_forearm_link", (
         Geom("box", (0.175, 0.035, 0.035), (0.0875, 0.0, 0.0), rgba=DARK),
     ), mass=0.23, com=(0.0875, 0.0, 0.0))
     m.joint("elbow", "revolute", "upper_arm_link", "upper_forearm_link", (0.04975, 0.0, 0.25), axis=Y_AXIS,
-            lower=-2.14675, upper=1.60570, effort=15.0, **lim)
+            **_wx_limits("elbow"))
     m.link("lower_forearm_link", (
         Geom("box", (0.075, 0.03, 0.03), (0.0375, 0.0, 0.0), rgba=DARK),
     ), mass=0.23, com=(0.0375, 0.0, 0.0))
     m.joint("forearm_roll", "revolute", "upper_forearm_link", "lower_forearm_link", (0.175, 0.0, 0.0),
-            axis=X_AXIS, lower=-(PI - 1e-5), upper=PI - 1e-5, effort=2.0, **lim)
+            axis=X_AXIS, **_wx_limits("forearm_roll"))
     m.link("wrist_link", (Geom("box", (0.05, 0.03, 0.03), (0.03, 0.0, 0.0), rgba=DARK),), mass=0.08,
            com=(0.03, 0.0, 0.0))
     m.joint("wrist_angle", "revolute", "lower_forearm_link", "wrist_link", (0.075, 0.0, 0.0), axis=Y_AXIS,
-            lower=-1.74533, upper=2.14675, effort=5.0, **lim)
+            **_wx_limits("wrist_angle"))
     m.link("gripper_link", (Geom("box", (0.04, 0.06, 0.03), (0.02, 0.0, 0.0), rgba=DARK),), mass=0.1,
            com=(0.02, 0.0, 0.0))
     m.joint("wrist_rotate", "revolute", "wrist_link", "gripper_link", (0.065, 0.0, 0.0), axis=X_AXIS,
-            lower=-(PI - 1e-5), upper=PI - 1e-5, effort=1.0, **lim)
+            **_wx_limits("wrist_rotate"))
     m.link("ee_arm_link", (), mass=0.01)
     m.joint("ee_arm", "fixed", "gripper_link", "ee_arm_link", (0.043, 0.0, 0.0))
     m.link("gripper_bar_link", (Geom("box", (0.01, 0.09, 0.02), (0.015, 0.0, 0.0), rgba=GREY),), mass=0.03)
@@ -225,10 +240,10 @@ def locobot_wx250s() -> UrdfModel:
     m.joint("camera_tower", "fixed", "base_link", "camera_tower_link", (-0.023997, -0.000044, 0.08823))
     m.link("pan_link", (Geom("box", (0.03, 0.04, 0.02), (0.0, 0.0, 0.005), rgba=DARK),), mass=0.05)
     m.joint("pan", "revolute", "camera_tower_link", "pan_link", (0.047228, 0.0, 0.44425), axis=Z_AXIS,
-            lower=-PI / 2, upper=PI / 2, velocity=PI, effort=2.0)
+            **_wx_limits("pan"))
     m.link("tilt_link", (Geom("box", (0.02, 0.03, 0.02), rgba=DARK, collide=False),), mass=0.05)
     m.joint("tilt", "revolute", "pan_link", "tilt_link", (0.025034, 0.0, 0.019), axis=Y_AXIS,
-            lower=-PI / 2, upper=1.309, velocity=PI, effort=2.0)
+            **_wx_limits("tilt"))
     m.link("camera_link", (Geom("box", (0.025, 0.09, 0.025), rgba=(0.1, 0.1, 0.1, 1.0)),), mass=0.07)
     m.joint("camera", "fixed", "tilt_link", "camera_link", (0.05318, 0.0175, 0.000009))
     m.link("camera_depth_link", (), mass=0.001)
@@ -274,29 +289,30 @@ def ur5e_robotiq() -> UrdfModel:
     m.joint("arm_mount", "fixed", "mobile_base_link", "base_link", UR_MOUNT)
     m.link("base_link_inertia", (), mass=0.01)
     m.joint("base_link-base_link_inertia", "fixed", "base_link", "base_link_inertia", rpy=(0.0, 0.0, PI))
-    big = {"velocity": PI, "lower": -2 * PI, "upper": 2 * PI}
+    # joint origins of the ROS description, from the official DH (d1, a2, a3, d4, d5, d6)
+    # and limits, both as the UR driver holds them (drivers/ur/model.py)
+    (d1, _, _), (_, a2, _), (_, a3, _), (d4, _, _), (d5, _, _), (d6, _, _) = DH["ur5e"]
+    lim = _ur_limits("ur5e")
     m.link("shoulder_link", (Geom("cylinder", (0.06, 0.12), (0.0, 0.0, -0.02), rgba=BLUE),), mass=3.761)
-    m.joint("shoulder_pan_joint", "revolute", "base_link_inertia", "shoulder_link", (0.0, 0.0, 0.1625),
-            effort=150.0, **big)
+    m.joint("shoulder_pan_joint", "revolute", "base_link_inertia", "shoulder_link", (0.0, 0.0, d1),
+            **lim["shoulder_pan_joint"])
     m.link("upper_arm_link", (
-        Geom("cylinder", (0.054, 0.425), (-0.2125, 0.0, 0.138), (0.0, PI / 2, 0.0), rgba=LIGHT),
-    ), mass=8.058, com=(-0.2125, 0.0, 0.138))
+        Geom("cylinder", (0.054, -a2), (a2 / 2, 0.0, 0.138), (0.0, PI / 2, 0.0), rgba=LIGHT),
+    ), mass=8.058, com=(a2 / 2, 0.0, 0.138))
     m.joint("shoulder_lift_joint", "revolute", "shoulder_link", "upper_arm_link", rpy=(PI / 2, 0.0, 0.0),
-            effort=150.0, **big)
+            **lim["shoulder_lift_joint"])
     m.link("forearm_link", (
-        Geom("cylinder", (0.04, 0.3922), (-0.1961, 0.0, 0.007), (0.0, PI / 2, 0.0), rgba=LIGHT),
-    ), mass=2.846, com=(-0.1961, 0.0, 0.007))
-    m.joint("elbow_joint", "revolute", "upper_arm_link", "forearm_link", (-0.425, 0.0, 0.0),
-            effort=150.0, velocity=PI, lower=-PI, upper=PI)
+        Geom("cylinder", (0.04, -a3), (a3 / 2, 0.0, 0.007), (0.0, PI / 2, 0.0), rgba=LIGHT),
+    ), mass=2.846, com=(a3 / 2, 0.0, 0.007))
+    m.joint("elbow_joint", "revolute", "upper_arm_link", "forearm_link", (a2, 0.0, 0.0), **lim["elbow_joint"])
     m.link("wrist_1_link", (Geom("cylinder", (0.038, 0.09), (0.0, 0.0, 0.0), rgba=BLUE),), mass=1.37)
-    m.joint("wrist_1_joint", "revolute", "forearm_link", "wrist_1_link", (-0.3922, 0.0, 0.1333),
-            effort=28.0, **big)
+    m.joint("wrist_1_joint", "revolute", "forearm_link", "wrist_1_link", (a3, 0.0, d4), **lim["wrist_1_joint"])
     m.link("wrist_2_link", (Geom("cylinder", (0.038, 0.09), (0.0, 0.0, 0.0), rgba=BLUE),), mass=1.3)
-    m.joint("wrist_2_joint", "revolute", "wrist_1_link", "wrist_2_link", (0.0, -0.0997, 0.0),
-            (PI / 2, 0.0, 0.0), effort=28.0, **big)
+    m.joint("wrist_2_joint", "revolute", "wrist_1_link", "wrist_2_link", (0.0, -d5, 0.0),
+            (PI / 2, 0.0, 0.0), **lim["wrist_2_joint"])
     m.link("wrist_3_link", (Geom("cylinder", (0.038, 0.03), (0.0, 0.0, -0.015), rgba=GREY),), mass=0.365)
-    m.joint("wrist_3_joint", "revolute", "wrist_2_link", "wrist_3_link", (0.0, 0.0996, 0.0),
-            (PI / 2, PI, PI), effort=28.0, **big)
+    m.joint("wrist_3_joint", "revolute", "wrist_2_link", "wrist_3_link", (0.0, d6, 0.0),
+            (PI / 2, PI, PI), **lim["wrist_3_joint"])
     m.link("flange", (), mass=0.001)
     m.joint("wrist_3-flange", "fixed", "wrist_3_link", "flange", rpy=(0.0, -PI / 2, -PI / 2))
     m.link("tool0", (), mass=0.001)
