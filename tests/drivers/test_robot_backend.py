@@ -128,19 +128,14 @@ def test_limit_above_spec_is_positioned(tmp_path: Path) -> None:
 
 
 
-def test_footprint_radius_sets_the_base_radius(tmp_path: Path, fake: KobukiFake) -> None:
+@pytest.mark.parametrize("extra,radius", [(", footprint_radius: 0.405", 0.405), ("", 0.178)])
+def test_footprint_radius_sets_the_base_radius(tmp_path: Path, fake: KobukiFake, extra: str, radius: float) -> None:
     """A larger platform on a Kobuki-protocol base: navigation inflates the map by the
-    configured footprint radius, not the Kobuki body's 0.178 m."""
-    cfg = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}, footprint_radius: 0.405}}\n")
+    configured footprint radius; without one, by the Kobuki body's 0.178 m."""
+    cfg = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}{extra}}}\n")
     robot = build_robot(load_config(cfg))
     try:
-        assert robot.base is not None and robot.base.radius == pytest.approx(0.405)
-    finally:
-        robot.close()
-    plain = _config(tmp_path, f"  base: {{kind: kobuki, port: {fake.port}}}\n")
-    robot = build_robot(load_config(plain))
-    try:
-        assert robot.base is not None and robot.base.radius == pytest.approx(0.178)
+        assert robot.base is not None and robot.base.radius == pytest.approx(radius)
     finally:
         robot.close()
 
