@@ -174,11 +174,7 @@ def off_tick(ctx: SkillContext, ws: ArmWorkspace, job: Callable[[], R]) -> Gener
     if getattr(ctx.clock, "stepped", False):
         while not fut.done():
             futures_wait((fut,), timeout=0.05)  # short waits: signal handlers still run
-        try:
-            yield
-        except SkillCancelled:
-            ws.planner.stop.clear()
-            raise
+        yield  # the job has returned: a cancel here just propagates
         return fut.result()
     try:
         while True:
@@ -538,6 +534,8 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
             res = ws.planner.plan_to_pose(q, cand[1].place, ik_seeds=seeds, config=cfg)
             if res.success:
                 chosen.append(cand)
+                break
+            if res.reason == CANCELLED:
                 break
         assert res is not None
         return res
