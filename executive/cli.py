@@ -433,7 +433,7 @@ def demo_table(results: Sequence[Any]) -> str:
 
 def _cmd_log(args: argparse.Namespace) -> int:
     from mmexec.executive.eventlog import LogFormatError, read_log
-    from mmexec.executive.logtools import render_frame, replay_frames, summary
+    from mmexec.executive.logtools import NoSuchRequest, render_frame, replay_frames, summary
 
     try:
         records = read_log(args.file)
@@ -441,13 +441,19 @@ def _cmd_log(args: argparse.Namespace) -> int:
         raise InputError.at(Mark(str(args.file), 1, 1), "no such file") from None
     except IsADirectoryError:
         raise InputError.at(Mark(str(args.file), 1, 1), "is a directory, expected an event log") from None
+    except OSError as e:  # unreadable, a path through a file, an I/O error
+        raise InputError.at(Mark(str(args.file), 1, 1), f"cannot read: {e.strerror or e}") from None
     except LogFormatError as e:
         raise UsageError(str(e)) from None
     if args.log_command == "summary":
         print(summary(records))
         return EXIT_OK
+    try:
+        frames = replay_frames(records, request=args.request)
+    except NoSuchRequest as e:
+        raise InputError.at(ArgMark("--request", 0, 0), f"{e} ({args.file})") from None
     count = 0
-    for frame in replay_frames(records, request=args.request):
+    for frame in frames:
         if count:
             if args.step and sys.stdin.isatty():
                 try:

@@ -7,12 +7,13 @@ so they are testable without a terminal. The record types are documented in
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-__all__ = ["Frame", "render_frame", "replay_frames", "summary"]
+__all__ = ["FRAME_EVENTS", "Frame", "NoSuchRequest", "render_frame", "replay_frames", "request_count", "summary"]
 
 #: py_trees' status symbols.
 SYMBOLS = {"SUCCESS": "✓", "FAILURE": "✕", "RUNNING": "*", "INVALID": "-"}
@@ -24,8 +25,29 @@ def _fmt_request(req: Any) -> str:
     return "-"
 
 
-def _dur(x: Any) -> str:
-    return f"{x:.1f} s" if isinstance(x, (int, float)) else "?"
+def _finite(value: Any) -> float | None:
+    """``value`` as a float when it is a finite JSON number (not a bool), else None: a log
+    written by hand or cut mid-record may carry anything."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return None
+    return float(value)
+
+
+def _int(value: Any, default: int) -> int:
+    """``value`` as an int when it is an integral JSON number, else ``default``."""
+    x = _finite(value)
+    return int(x) if x is not None and x.is_integer() else default
+
+
+def _time(value: Any, default: float) -> float:
+    """``value`` as clock seconds [s] when it is a finite JSON number, else ``default``."""
+    x = _finite(value)
+    return default if x is None else x
+
+
+def _dur(value: Any) -> str:
+    x = _finite(value)
+    return "?" if x is None else f"{x:.1f} s"
 
 
 def summary(records: Sequence[dict[str, Any]]) -> str:
@@ -50,7 +72,7 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
     for r in records:
         ev = r.get("event")
         if ev == "request_start":
-            idx = int(r.get("index", len(order) + 1))
+            idx = _int(r.get("index"), len(order) + 1)
             current = per_req[idx] = {"start": r, "recoveries": [], "failures": [], "end": None}
             order.append(idx)
         elif ev == "mission_reload":
@@ -78,10 +100,11 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
             lines.append(f"request {idx}/{n_req} ({req}): unfinished (log ends mid-request)")
             outcomes["unfinished"] += 1
             continue
-        outcome = end_rec.get("outcome", "?")
+        outcome = str(end_rec.get("outcome", "?"))
         outcomes[outcome] += 1
-        if isinstance(end_rec.get("duration"), (int, float)):
-            durations.append(float(end_rec["duration"]))
+        duration = _finite(end_rec.get("duration"))
+        if duration is not None:
+            durations.append(duration)
         head = f"request {idx}/{n_req} ({req}): {outcome} after {_dur(end_rec.get('duration'))}"
         n_rec = len(info["recoveries"])
         head += f", {n_rec} recover{'y' if n_rec == 1 else 'ies'}" if n_rec else ""
@@ -93,12 +116,13 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
             lines.append(f"    skill {f.get('skill')} failed ({f.get('kind')}) at {_dur(f.get('t'))} "
                          f"in {f.get('node')}: {f.get('reason')}")
         if outcome != "success":
-            reason = end_rec.get("reason") or "(no reason recorded)"
+            reason = str(end_rec.get("reason") or "(no reason recorded)")
             node = end_rec.get("failure_node")
             lines.append(f"    reason: {reason}" + (f" [{node}]" if node else ""))
             reasons[reason] += 1
     for r in reloads:
-        state = "ok" if r.get("ok") else "rejected: " + "; ".join(r.get("problems", []))
+        problems = r.get("problems")
+        state = "ok" if r.get("ok") else "rejected: " + "; ".join(map(str, problems if isinstance(problems, list) else []))
         lines.append(f"mission reload at {_dur(r.get('t'))}: {state}")
 
     lines.append("")
@@ -122,7 +146,9 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
 
 @dataclass
 class Frame:
-    """The tree's state after one clock instant of one request."""
+    """The tree's state after one clock instant of one request: ``t`` [clock s], the node
+    paths in tree order, each node's status, the paths that changed at ``t`` and the
+    events recorded at ``t``."""
 
     index: int
     of: int
@@ -133,42 +159,74 @@ class Frame:
     events: list[str] = field(default_factory=list)
 
 
+#: Records shown as the events of a frame (under the frame of their own ``t``).
+FRAME_EVENTS = frozenset({"skill_failure", "skill_cancel", "recovery_attempt", "recovery_give_up",
+                          "recovery_failed", "halt", "halt_abandoned", "report", "request_end"})
+
+#: Two clock times [s] closer than this are the same instant (one tick).
+SAME_INSTANT = 1e-9
+
+
+class NoSuchRequest(LookupError):
+    """``replay_frames(request=N)`` for an N the log does not hold; the message is one
+    line (``no request 5: the log has 2 requests``)."""
+
+
+def request_count(records: Sequence[dict[str, Any]]) -> int:
+    """How many requests the log holds (its ``request_start`` records)."""
+    return sum(1 for r in records if r.get("event") == "request_start")
+
+
 def replay_frames(records: Sequence[dict[str, Any]], request: int | None = None) -> Iterator[Frame]:
-    """Rebuild the tree's states from ``request_start`` (node list) and ``node_status``
-    records: one :class:`Frame` per clock time at which something changed. ``request``
-    keeps only that request (1-based)."""
+    """Rebuild the tree's states from ``request_start`` (node list), ``node_status`` and
+    event records: one :class:`Frame` per clock time at which a node changed or an event
+    of :data:`FRAME_EVENTS` was recorded; every change and event is shown under the frame
+    of its own ``t`` (a record without a usable ``t`` belongs to the instant before it).
+    ``request`` keeps only that request (1-based); a number the log does not hold raises
+    :class:`NoSuchRequest` at once (before iteration)."""
+    if request is not None:
+        n = request_count(records)
+        if not 1 <= request <= n:
+            held = f"{n} request{'' if n == 1 else 's'}" if n else "no requests"
+            raise NoSuchRequest(f"no request {request}: the log has {held}")
+    return _frames(records, request)
+
+
+def _frames(records: Sequence[dict[str, Any]], request: int | None) -> Iterator[Frame]:
     frame: Frame | None = None
     nodes: list[str] = []
     status: dict[str, str] = {}
     idx = of = 0
+    now = 0.0
     for r in records:
         ev = r.get("event")
         if ev == "request_start":
             if frame is not None:
                 yield frame
                 frame = None
-            idx, of = int(r.get("index", 0)), int(r.get("of", 0))
-            nodes = list(r.get("nodes") or [])
-            status = {p: "INVALID" for p in nodes}
+            idx, of = _int(r.get("index"), idx + 1), _int(r.get("of"), 0)
+            listed = r.get("nodes")
+            nodes = [str(p) for p in listed] if isinstance(listed, list) else []
+            status = dict.fromkeys(nodes, "INVALID")
+            now = _time(r.get("t"), now)
             continue
-        if request is not None and idx != request:
+        if (request is not None and idx != request) or (ev != "node_status" and ev not in FRAME_EVENTS):
             continue
+        t = _time(r.get("t"), now)
+        if frame is not None and abs(frame.t - t) > SAME_INSTANT:
+            yield frame
+            frame = None
+        now = t
+        if frame is None:
+            frame = Frame(idx, of, t, list(nodes), dict(status))
         if ev == "node_status":
-            t = float(r.get("t", 0.0))
-            if frame is not None and abs(frame.t - t) > 1e-9:
-                yield frame
-                frame = None
             path = str(r.get("path"))
             if path not in status:
                 nodes.append(path)
-            status[path] = str(r.get("new"))
-            if frame is None:
-                frame = Frame(idx, of, t, list(nodes), {}, set(), [])
-            frame.nodes = list(nodes)
-            frame.status = dict(status)
+                frame.nodes = list(nodes)
+            status[path] = frame.status[path] = str(r.get("new"))
             frame.changed.add(path)
-        elif ev in ("skill_failure", "recovery_attempt", "recovery_give_up", "recovery_failed", "halt",
-                    "skill_cancel", "report", "request_end") and frame is not None:
+        else:
             detail = r.get("reason") or r.get("message") or r.get("outcome") or ""
             frame.events.append(f"{ev} {r.get('node', '')} {detail}".strip())
     if frame is not None:
