@@ -20,6 +20,7 @@ from dataclasses import dataclass
 __all__ = [
     "HARDWARE_ERROR_BITS",
     "MODELS",
+    "TWO_XL430_W250",
     "Access",
     "Area",
     "Model",
@@ -222,16 +223,34 @@ XM540_W270 = Model(
     ),
     _ALL_MODES,
 )
-XL430_W250 = Model(
-    1060,
-    "XL430-W250",
-    _x_series(
-        model_number=1060, current_limit=None, temperature_limit=72, max_voltage=140, min_voltage=60
-    ),
-    _ALL_MODES - {OperatingMode.CURRENT, OperatingMode.CURRENT_BASED_POSITION},
-)
 
-MODELS: dict[int, Model] = {m.number: m for m in (XM430_W350, XM540_W270, XL430_W250)}
+
+def _xl430(number: int, name: str) -> Model:
+    """The XL430 family's table: no current sensor (Present Load at 126), no current modes."""
+    return Model(
+        number,
+        name,
+        _x_series(
+            model_number=number,
+            current_limit=None,
+            temperature_limit=72,
+            max_voltage=140,
+            min_voltage=60,
+        ),
+        _ALL_MODES - {OperatingMode.CURRENT, OperatingMode.CURRENT_BASED_POSITION},
+    )
+
+
+XL430_W250 = _xl430(1060, "XL430-W250")
+
+#: The LoCoBot pan/tilt head: one dual-axis unit with two ids, each its own X-series control
+#: table (the XL430-W250's, Present Load at 126), but Model Number 1090, not 1060 (ROBOTIS
+#: e-Manual 2XL430-W250 control table; DynamixelSDK's ``XL430_W250_2``).
+TWO_XL430_W250 = _xl430(1090, "2XL430-W250")
+
+MODELS: dict[int, Model] = {
+    m.number: m for m in (XM430_W350, XM540_W270, XL430_W250, TWO_XL430_W250)
+}
 
 
 def model_by_number(number: int) -> Model:

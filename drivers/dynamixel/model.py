@@ -1,10 +1,13 @@
 """WX250s model facts (robots.md 1.2-1.3, hardware-protocols.md 2.5), data only, no I/O.
 
-The one place for the arm's servo ids, register limits [pulses], URDF joint limits [rad],
-efforts [N m], drive directions and shadow servos; the LoCoBot arm mount; and the gripper's
-horn/arm linkage (servo angle [rad] <-> finger gap [m]). The driver
-(:mod:`mmexec.drivers.dynamixel.wx250s`) and the planning kinematics
-(:mod:`mmexec.skills.manipulation.kinematics`) both read them from here.
+The one place for the arm's servo ids and models (XM430-W350 1020, XL430-W250 1060, the
+LoCoBot's 2XL430-W250 pan/tilt 1090, as the ROBOTIS e-Manual tables give them), register
+limits [pulses], URDF joint limits [rad], efforts [N m], drive directions and shadow servos;
+the LoCoBot arm mount; and the gripper's horn/arm linkage (servo angle [rad] <-> finger gap
+[m]). The driver (:mod:`mmexec.drivers.dynamixel.wx250s`) and the planning kinematics
+(:mod:`mmexec.skills.manipulation.kinematics`) both read them from here; the fake bus
+(:mod:`mmexec.drivers.fakes.dynamixel`) takes its servo table (ids, models, limits) from the
+vendor tables instead, so a wrong fact here shows up as a failed bring-up in the tests.
 """
 
 from __future__ import annotations
@@ -12,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from mmexec.drivers.dynamixel.control_table import XL430_W250, XM430_W350, Model
+from mmexec.drivers.dynamixel.control_table import TWO_XL430_W250, XL430_W250, XM430_W350, Model
 from mmexec.drivers.interfaces import JointLimit
 
 __all__ = [
@@ -66,9 +69,12 @@ ARM_JOINTS: tuple[JointSpec, ...] = (
     JointSpec("wrist_rotate", 8, XL430_W250, 0, 4095, -_PI, _PI, effort=1.0),
 )
 GRIPPER = JointSpec("gripper", 9, XL430_W250, 0, 4095, -math.pi, math.pi, effort=1.0)
+#: the LoCoBot head: one 2XL430-W250 (model 1090 on both ids, not the XL430-W250's 1060)
 PAN_TILT: tuple[JointSpec, ...] = (
-    JointSpec("pan", 10, XL430_W250, 1024, 3072, -math.pi / 2, math.pi / 2, effort=2.0),
-    JointSpec("tilt", 11, XL430_W250, 1024, 3072, -math.pi / 2, 1.309, effort=2.0, reversed=True),
+    JointSpec("pan", 10, TWO_XL430_W250, 1024, 3072, -math.pi / 2, math.pi / 2, effort=2.0),
+    JointSpec(
+        "tilt", 11, TWO_XL430_W250, 1024, 3072, -math.pi / 2, 1.309, effort=2.0, reversed=True
+    ),
 )
 #: ``T_base_armbase`` of the LoCoBot: arm_base_link in base_link (robots.md 1.2)
 LOCOBOT_MOUNT = (0.097277, 0.0, 0.10795)

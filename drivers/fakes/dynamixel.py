@@ -4,7 +4,9 @@ Use it to rehearse bring-up without an arm (``mmexec hw fake dynamixel`` prints 
 and in tests. :class:`FakeDxlBus` parses instruction packets (with byte stuffing) from the
 driver and answers like X-series servos (hardware-protocols.md section 2.6):
 
-* one :class:`FakeServo` per id with its model's control table (:mod:`mmexec.drivers.dynamixel.control_table`),
+* one :class:`FakeServo` per id, built from the vendor's tables (model numbers of the ROBOTIS
+  e-Manual, the WX250s / LoCoBot bus of hardware-protocols.md 2.5; never from the driver's
+  model.py), with the X-series register layout of :mod:`mmexec.drivers.dynamixel.control_table`;
   EEPROM locked while torque is on (error 7), position limits (error 6), data length (5),
   data range (4: bad operating mode, goal write after the bus watchdog fired), unknown
   instruction or Action without Reg Write (2);
@@ -45,17 +47,18 @@ from collections.abc import Iterable, Sequence
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.codec import BROADCAST_ID, BadFrame, Instruction, Packet, StatusResult
 from mmexec.drivers.dynamixel.control_table import (
-    MODELS,
+    XL430_W250,
+    XM430_W350,
     Area,
     Model,
     OperatingMode,
     encode_hardware_error,
     rad_to_pulses,
 )
-from mmexec.drivers.dynamixel.model import ARM_JOINTS, GRIPPER, PAN_TILT, gripper_angle_for_width
+from mmexec.drivers.dynamixel.model import gripper_angle_for_width
 from mmexec.drivers.fakes.pty import PtyDevice
 
-__all__ = ["FakeDxlBus", "FakeServo", "wx250s_servos"]
+__all__ = ["VENDOR_MODEL_NUMBERS", "FakeDxlBus", "FakeServo", "servos_from_ids", "wx250s_servos"]
 
 log = logging.getLogger(__name__)
 
@@ -64,23 +67,75 @@ _ALERT = 0x80
 #: pulses per second per velocity unit (0.229 rev/min)
 _PULSES_S_PER_UNIT = 0.229 * 4096.0 / 60.0
 
+# The servo facts below are copied from the vendor documents (hardware-protocols.md 2.4-2.5,
+# the ROBOTIS e-Manual control tables, DynamixelSDK's dynamixel_item.h), not from the
+# driver's model (mmexec.drivers.dynamixel.model): a fake that reads the driver's table
+# agrees with the driver's mistakes. Only the register layout is shared
+# (control_table.py; the X-series addresses are the same on every model here).
+
+#: Model Number register (address 0) per servo, from the ROBOTIS e-Manual control tables.
+VENDOR_MODEL_NUMBERS: dict[str, int] = {
+    "XM430-W350": 1020,
+    "XM430-W210": 1030,
+    "XL430-W250": 1060,
+    "XC430-W150": 1070,
+    "XC430-W240": 1080,
+    "2XL430-W250": 1090,  # dual-axis unit: the same number on both of its ids
+    "XM540-W270": 1120,
+    "XM540-W150": 1130,
+}
+#: register layout per servo: XM / XM540 report Present Current at 126, the XL430 family
+#: (XL430, 2XL430, XC430) Present Load, and has no current-control modes
+_LAYOUT: dict[str, Model] = {
+    name: XM430_W350 if name.startswith("XM") else XL430_W250 for name in VENDOR_MODEL_NUMBERS
+}
+
+#: The WX250s bus (hardware-protocols.md 2.5): id, servo, Drive Mode bit 0 (reversed),
+#: Secondary ID (255: none), Min / Max Position Limit [pulses], joint index in the sleep
+#: pose (a shadow sits where its primary does; None: 2048 pulses)
+_WX250S_BUS: tuple[tuple[int, str, int, int, int, int, int | None], ...] = (
+    (1, "XM430-W350", 0, 255, 0, 4095, 0),  # waist
+    (2, "XM430-W350", 0, 255, 819, 3345, 1),  # shoulder
+    (3, "XM430-W350", 1, 2, 819, 3345, 1),  # shoulder_shadow
+    (4, "XM430-W350", 0, 255, 648, 3094, 2),  # elbow
+    (5, "XM430-W350", 1, 4, 648, 3094, 2),  # elbow_shadow
+    (6, "XM430-W350", 0, 255, 0, 4095, 3),  # forearm_roll
+    (7, "XM430-W350", 1, 255, 910, 3447, 4),  # wrist_angle
+    (8, "XL430-W250", 0, 255, 0, 4095, 5),  # wrist_rotate
+    (9, "XL430-W250", 0, 255, 0, 4095, None),  # gripper
+)
+#: the LoCoBot's pan (10) and tilt (11): the two ids of one 2XL430-W250
+_LOCOBOT_HEAD: tuple[tuple[int, int, int, int, int], ...] = (
+    (10, 0, 255, 1024, 3072),
+    (11, 1, 255, 1024, 3072),
+)
+#: sleep poses [rad], waist .. wrist_rotate (hardware-protocols.md 2.5)
+_SLEEP = (0.0, -1.80, 1.55, 0.0, 0.8, 0.0)
+_LOCOBOT_SLEEP = (0.0, -1.1, 1.55, 0.0, 0.5, 0.0)
+
 
 class FakeServo:
     """One simulated X-series servo: control-table memory plus a simple motion model.
 
-    ``stops`` are mechanical end stops [pulses] (e.g. the gripper fingers), ``obstacle``
-    an injected object position [pulses] that stalls motion toward it.
+    ``servo`` is the vendor's name (a key of :data:`VENDOR_MODEL_NUMBERS`); it sets the
+    Model Number the servo reports and its register layout (:attr:`model`). ``stops`` are
+    mechanical end stops [pulses] (e.g. the gripper fingers), ``obstacle`` an injected
+    object position [pulses] that stalls motion toward it.
     """
 
     def __init__(
         self,
         dxl_id: int,
-        model: Model,
+        servo: str = "XM430-W350",
         *,
         position: int = 2048,
         stops: tuple[int, int] | None = None,
     ) -> None:
-        self.model = model
+        if servo not in VENDOR_MODEL_NUMBERS:
+            raise ValueError(f"unknown servo {servo!r} (known: {', '.join(VENDOR_MODEL_NUMBERS)})")
+        self.servo = servo
+        self.model_number = VENDOR_MODEL_NUMBERS[servo]
+        self.model = _LAYOUT[servo]
         self.present = True
         self.stops = stops
         self.obstacle: int | None = None
@@ -110,6 +165,7 @@ class FakeServo:
             self.mem[r.address : r.address + r.size] = (
                 r.default & ((1 << (8 * r.size)) - 1)
             ).to_bytes(r.size, "little")
+        self._set("model_number", self.model_number)
         for n, v in keep.items():
             self._set(n, v)
 
@@ -304,33 +360,32 @@ class FakeServo:
         self.hold(now)
 
 
-def wx250s_servos(*, locobot: bool = False, configured: bool = False) -> list[FakeServo]:
+def wx250s_servos(
+    *, locobot: bool = False, configured: bool = False, head: str = "2XL430-W250"
+) -> list[FakeServo]:
     """The servos of a WX250s arm (ids 1-9; LoCoBot adds pan 10 and tilt 11) at the sleep pose.
 
-    ``configured=False`` leaves the EEPROM at factory values (apart from id and baud rate)
-    so a driver's bring-up has to write them; True pre-applies the Interbotix settings.
+    The table is the vendor's (hardware-protocols.md 2.5), not the driver's. ``configured=False``
+    leaves the EEPROM at factory values (apart from id and baud rate) so a driver's bring-up
+    has to write them; True pre-applies the Interbotix settings. ``head`` is the servo of the
+    LoCoBot's pan/tilt (a real LoCoBot: one 2XL430-W250, model 1090 on both ids).
     """
-    sleep = (0.0, -1.1, 1.55, 0.0, 0.5, 0.0) if locobot else (0.0, -1.80, 1.55, 0.0, 0.8, 0.0)
-    waist, shoulder, elbow, roll, wangle, wrot = (rad_to_pulses(q) for q in sleep)
+    sleep = _LOCOBOT_SLEEP if locobot else _SLEEP
     # finger end stops: 30 mm and 74 mm between the pads (robots.md 1.3)
-    grip_lo, grip_hi = (
+    grip_stops = (
         rad_to_pulses(gripper_angle_for_width(0.030)),
         rad_to_pulses(gripper_angle_for_width(0.074)),
     )
-    # ids, models, drive directions, shadows and register limits from the one WX250s model
-    start = dict(zip((j.name for j in ARM_JOINTS), (waist, shoulder, elbow, roll, wangle, wrot)))
-    spec: list[tuple[int, Model, int, int, int, tuple[int, int]]] = []
-    for j in ARM_JOINTS + (GRIPPER,) + (PAN_TILT if locobot else ()):
-        limits = (j.min_pulses, j.max_pulses)
-        pos = start.get(j.name, 2048)
-        spec.append((j.id, j.model, pos, int(j.reversed), 255, limits))
-        if j.shadow is not None:  # the shadow turns the other way, driven by its primary
-            spec.append((j.shadow, j.model, pos, 1, j.id, limits))
-    spec.sort()
+    bus = list(_WX250S_BUS)
+    if locobot:
+        bus += [(i, head, drive, sec, lo, hi, None) for i, drive, sec, lo, hi in _LOCOBOT_HEAD]
     servos = []
-    for dxl_id, model, pos, drive, secondary, (lo, hi) in spec:
+    for dxl_id, servo, drive, secondary, lo, hi, joint in bus:
         s = FakeServo(
-            dxl_id, model, position=pos, stops=(grip_lo, grip_hi) if dxl_id == 9 else None
+            dxl_id,
+            servo,
+            position=2048 if joint is None else rad_to_pulses(sleep[joint]),
+            stops=grip_stops if dxl_id == 9 else None,
         )
         if configured:
             s._set("return_delay_time", 0)
@@ -469,9 +524,8 @@ class FakeDxlBus(PtyDevice):
     def _ping(self, p: Packet, now: float) -> None:
         for s, replies in sorted(self._addressed(p.id), key=lambda x: x[0].id):
             if replies or p.id == BROADCAST_ID:
-                self._reply(
-                    s, 0, codec.int_to_le(s.model.number, 2) + bytes((s.get("firmware_version"),))
-                )
+                fw = s.get("firmware_version")
+                self._reply(s, 0, codec.int_to_le(s.get("model_number"), 2) + bytes((fw,)))
 
     def _read(self, p: Packet, now: float) -> None:
         if len(p.params) != 4:
@@ -610,6 +664,6 @@ _HANDLERS = {
 }
 
 
-def servos_from_ids(ids: Sequence[int], model_number: int = 1020) -> list[FakeServo]:
-    """Plain servos with the given ids, all of one model (for generic bus tests)."""
-    return [FakeServo(i, MODELS[model_number]) for i in ids]
+def servos_from_ids(ids: Sequence[int], servo: str = "XM430-W350") -> list[FakeServo]:
+    """Plain servos with the given ids, all of one vendor model (for generic bus tests)."""
+    return [FakeServo(i, servo) for i in ids]

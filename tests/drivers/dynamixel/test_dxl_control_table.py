@@ -10,9 +10,13 @@ from mmexec.drivers.dynamixel import control_table as ct
 
 
 def test_models_and_registers() -> None:
-    assert set(ct.MODELS) == {1020, 1060, 1120}
+    assert set(ct.MODELS) == {1020, 1060, 1090, 1120}
     xm, xl, x540 = ct.MODELS[1020], ct.MODELS[1060], ct.MODELS[1120]
     assert xm.name == "XM430-W350" and xl.name == "XL430-W250" and x540.name == "XM540-W270"
+    # the LoCoBot's pan/tilt unit: the XL430's table under its own model number
+    two_xl = ct.MODELS[1090]
+    assert two_xl.name == "2XL430-W250" and two_xl.reg("model_number").default == 1090
+    assert [r.address for r in two_xl.registers] == [r.address for r in xl.registers]
     gp = xm.reg("goal_position")
     assert (gp.address, gp.size, gp.access, gp.area) == (116, 4, ct.Access.RW, ct.Area.RAM)
     assert xm.reg("operating_mode").area is ct.Area.EEPROM

@@ -10,7 +10,13 @@ from collections.abc import Callable, Iterator
 import numpy as np
 import pytest
 
-from mmexec.drivers.dynamixel.bus import CorruptReply, HardwareFault, NoReply, PortUnavailable
+from mmexec.drivers.dynamixel.bus import (
+    CorruptReply,
+    DynamixelError,
+    HardwareFault,
+    NoReply,
+    PortUnavailable,
+)
 from mmexec.drivers.dynamixel.control_table import OperatingMode, pulses_to_rad
 from mmexec.drivers.dynamixel.wx250s import (
     WX250s,
@@ -313,11 +319,14 @@ def test_gripper_cancel_stops_pwm(arm: WX250s, fake: FakeDxlBus) -> None:
 
 
 def test_locobot_variant(no_leaks: None) -> None:
+    # the fake is a real LoCoBot: pan/tilt is one 2XL430-W250, model 1090 on ids 10 and 11
+    # (a driver expecting the XL430-W250's 1060 there refuses to bring the arm up)
     with FakeDxlBus(wx250s_servos(locobot=True)) as fake:
         dev = WX250s(cfg(fake.port, locobot=True))
         dev.connect()
         try:
             assert sorted(dev.found) == list(range(1, 12))
+            assert dev.found[10].model == dev.found[11].model == 1090
             assert np.allclose(dev.arm.mount[:3, 3], (0.097277, 0.0, 0.10795))
             assert (
                 fake.servo(11).get("drive_mode") == 1
@@ -326,6 +335,18 @@ def test_locobot_variant(no_leaks: None) -> None:
             assert fake.servo(10).torque
         finally:
             dev.close()
+
+
+def test_locobot_with_a_wrong_head_servo_is_refused(no_leaks: None) -> None:
+    # an XL430-W250 (1060) where the 2XL430-W250 belongs: named, and nothing is configured
+    with FakeDxlBus(wx250s_servos(locobot=True, head="XL430-W250")) as fake:
+        dev = WX250s(cfg(fake.port, locobot=True))
+        with pytest.raises(DynamixelError) as e:
+            dev.connect()
+        assert str(e.value) == (
+            f"{fake.port}: servo id 10 (pan) is XL430-W250 (1060), expected 2XL430-W250 (1090)"
+        )
+        assert not dev.connected and fake.goal_writes == 0
 
 
 def test_close_holds_and_leaves_no_threads(fake: FakeDxlBus) -> None:
