@@ -8,7 +8,9 @@ Exit codes:
 * 2: bad input (missing file, bad YAML, bad config or mission, a mission needing a
   capability the configured robot lacks, bad ``--request``, unknown skill module, bad
   command line), with one line per problem on stderr and no traceback;
-* 130: interrupted (Ctrl-C): the tree was halted, the robot left safe, the log flushed.
+* 130: interrupted (Ctrl-C): the tree was halted, the robot left safe, the log flushed;
+* 141: the reader of standard output went away (``mmexec show ... | head``): the
+  command stopped writing and exited quietly (128 + SIGPIPE, as a Unix tool reports).
 
 An unexpected exception prints ``mmexec: internal error: ...`` (one line, with the log
 path when a run had started) and exits 1; ``MMEXEC_DEBUG=1`` shows the traceback.
@@ -32,6 +34,8 @@ from mmexec.executive.runner import ArgMark, BackendStartError
 __all__ = ["main"]
 
 EXIT_OK, EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+#: Standard output was closed by its reader (128 + SIGPIPE, what a Unix tool killed by it reports).
+EXIT_BROKEN_PIPE = 141
 
 #: The requests ``mmexec demo`` serves (markers of the lab's boxes 3 and 5).
 DEMO_REQUESTS: tuple[dict[str, str], ...] = ({"item": "3"}, {"item": "5"})
@@ -485,6 +489,19 @@ def _cmd_hw(rest: Sequence[str]) -> int:
 _CURRENT_LOG: list[Path | None] = [None]
 
 
+def _stdout_gone() -> int:
+    """Standard output's reader went away (``mmexec log replay ... | head``): point file
+    descriptor 1 at /dev/null, so the interpreter's last flush of what is still buffered
+    cannot fail again, and return :data:`EXIT_BROKEN_PIPE` without a word (the user
+    closed the pipe on purpose)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    finally:
+        os.close(devnull)
+    return EXIT_BROKEN_PIPE
+
+
 def _dispatch(argv: list[str]) -> int:
     if argv and argv[0] == "hw":
         return _cmd_hw(argv[1:])
@@ -518,7 +535,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                         format="mmexec: %(levelname)s: %(name)s: %(message)s")
     _CURRENT_LOG[0] = None
     try:
-        return _dispatch(args)
+        code = _dispatch(args)
+        sys.stdout.flush()  # a reader that went away (`| head`) shows up here, not at exit
+        return code
+    except BrokenPipeError:
+        return _stdout_gone()
     except InputError as e:
         for p in e.problems:
             print(str(p), file=sys.stderr)
