@@ -5,8 +5,11 @@ Use it to test the driver and to rehearse bring-up without a robot::
     with KobukiFake() as fake:            # starts streaming at 50 Hz
         base = KobukiDevice(KobukiConfig(port=fake.port))
         ...
-        fake.set_sensors(bumper=0x04)     # press the left bumper
+        fake.set_sensors(bumper=0x04)     # press the left bumper (raw bits, section 1.4)
+        fake.set_fault("cliff_centre")    # the same by name
         fake.corrupt_next(3)              # next 3 frames with a wrong checksum
+        fake.corrupt_stream()             # every frame from now on (until corrupt_stream(False))
+        fake.mute = True                  # stops streaming but still obeys commands
 
 or from a shell: ``mmexec hw fake kobuki`` prints the port and serves until Ctrl-C.
 
@@ -20,10 +23,23 @@ What it does (hardware-protocols.md 1.6):
   the next frame; records Sound, Sound Sequence, GP output (LED state) and Set
   Controller Gain;
 * ignores and counts command frames with a bad checksum;
-* lets tests set bumper, cliff, wheel-drop, buttons, charger, battery and overcurrent;
-* fault injection: wrong checksum, stray bytes before the header, truncated frames,
-  unknown sub-payload ids, silence (:attr:`silent`, :meth:`unplug`), encoder and
-  timestamp values near wrap-around, any firmware version (e.g. major 2).
+* lets tests set bumper, cliff, wheel-drop, buttons, charger, battery and overcurrent,
+  as raw bits (:meth:`set_sensors`) or by name (:meth:`set_fault`, bit table
+  :data:`SAFETY_BITS` from section 1.4);
+* fault injection: wrong checksum (:meth:`corrupt_next`, or the whole stream with
+  :meth:`corrupt_stream`), stray bytes before the header, truncated frames, dropped
+  frames (:meth:`drop_next`: stamped and never sent, so the host sees a timestamp gap),
+  unknown sub-payload ids, encoder and timestamp values near wrap-around, any firmware
+  version (e.g. major 2), and three kinds of silence:
+
+  - :attr:`mute`: the robot stops streaming but still hears and obeys commands (its
+    transmit line or its streaming died); it keeps moving on its last command;
+  - :attr:`silent` (from :class:`~mmexec.drivers.fakes.pty.PtyDevice`): powered off,
+    neither streams nor hears;
+  - :meth:`unplug`: the cable is pulled (the host's port fails with EIO); with a ``link``
+    path (like the vendor udev rule's ``/dev/kobuki``) the path disappears too, and
+    :meth:`replug` plugs it back in: a new pty behind the same path, the robot still
+    driving on its last command.
 
 Like the real firmware (safety controller disabled since 1.1.2), the fake keeps
 driving on its last command; stopping on bumpers or a lost host is the driver's job.
@@ -34,17 +50,36 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Self
 
 from mmexec.drivers.fakes.pty import PtyDevice
 from mmexec.drivers.kobuki import codec as k
 
-__all__ = ["FakeKobukiState", "KobukiFake"]
+__all__ = ["SAFETY_BITS", "FakeKobukiState", "KobukiFake"]
 
 log = logging.getLogger(__name__)
 
 _TICKS_PER_MM = 1.0 / (k.TICK_TO_RAD * k.WHEEL_RADIUS * 1000.0)
+
+#: Safety conditions in the basic sensor data (id 1) as hardware-protocols.md 1.4 lays them
+#: out, written from that table (not from the driver's codec): name -> (field, bit).
+#: Overcurrent has the opposite bit order to bumper and wheel drop (0x01 is the left wheel).
+SAFETY_BITS: dict[str, tuple[str, int]] = {
+    "bumper_right": ("bumper", 0x01),
+    "bumper_centre": ("bumper", 0x02),
+    "bumper_left": ("bumper", 0x04),
+    "wheel_drop_right": ("wheel_drop", 0x01),
+    "wheel_drop_left": ("wheel_drop", 0x02),
+    "cliff_right": ("cliff", 0x01),
+    "cliff_centre": ("cliff", 0x02),
+    "cliff_left": ("cliff", 0x04),
+    "overcurrent_left": ("overcurrent", 0x01),
+    "overcurrent_right": ("overcurrent", 0x02),
+}
 
 
 @dataclass
@@ -74,9 +109,18 @@ class FakeKobukiState:
     sounds: list[tuple[int, int]] = field(default_factory=list)
     sound_sequences: list[int] = field(default_factory=list)
     base_control_frames: int = 0
+    moving_commands: int = 0        # Base Control frames with a non-zero speed
     bad_command_frames: int = 0
     malformed_command_frames: int = 0
     requests: list[int] = field(default_factory=list)
+    frames_sent: int = 0            # feedback frames written to the port (corrupt ones included)
+    frames_corrupted: int = 0       # of which sent with a wrong checksum or truncated
+    frames_dropped: int = 0         # stamped but never sent (drop_next, mute)
+
+    @property
+    def frames_stepped(self) -> int:
+        """20 ms steps of fake time so far (frames sent or dropped)."""
+        return self.frames_sent + self.frames_dropped
 
     @property
     def leds(self) -> dict[str, str]:
@@ -93,18 +137,71 @@ class KobukiFake(PtyDevice):
 
     tick_period = 0.02
 
-    def __init__(self, *, firmware: tuple[int, int, int] = (1, 2, 0), name: str = "kobuki-fake") -> None:
+    def __init__(self, *, firmware: tuple[int, int, int] = (1, 2, 0), name: str = "kobuki-fake",
+                 link: str | os.PathLike[str] | None = None) -> None:
+        """``link``: a path kept as a symlink to the pty while plugged in (what the vendor
+        udev rule does with ``/dev/kobuki``); :attr:`port` is then that path, and it survives
+        :meth:`unplug` / :meth:`replug`. Without it :attr:`port` is the pty itself."""
         super().__init__(name)
         self.state = FakeKobukiState(firmware=k.Version(*firmware))
+        self.mute = False
+        self._link = Path(link) if link is not None else None
         self._parser = k.FrameParser()
         self._pending_extra = 0
         self._pending_gain = False
         self._corrupt = 0
+        self._corrupt_all = False
+        self._drop = 0
         self._truncate = 0
         self._stray = b""
         self._unknown = 0
         self._gyro_frame = 0
         self._mutex = threading.RLock()
+
+    # ------------------------------------------------------------------ plugging
+    @property
+    def port(self) -> str:
+        """The path for the driver to open: the ``link`` path if one was given, else the pty."""
+        if self._link is not None:
+            return str(self._link)
+        return self.pty_path
+
+    @property
+    def pty_path(self) -> str:
+        """The pty slave behind :attr:`port` (changes on :meth:`replug`)."""
+        return PtyDevice.port.fget(self)  # type: ignore[attr-defined,no-any-return]
+
+    def start(self) -> Self:
+        super().start()
+        if self._link is not None:
+            tmp = self._link.with_name(f".{self._link.name}.{os.getpid()}.tmp")
+            tmp.unlink(missing_ok=True)
+            tmp.symlink_to(self.pty_path)
+            tmp.replace(self._link)
+        return self
+
+    def stop(self) -> None:
+        super().stop()
+        self._remove_link()
+
+    def unplug(self) -> None:
+        """Pull the cable: the host's port fails, and the ``link`` path (if any) disappears."""
+        super().unplug()
+        self._remove_link()
+
+    def replug(self) -> None:
+        """Plug the cable back in after :meth:`unplug`: a new pty behind the same ``link``
+        path. The robot state (pose, last command, sensors) is kept."""
+        if self._link is None:
+            raise RuntimeError(f"{self.name}: replug() needs a link path (KobukiFake(link=...))")
+        super().stop()  # joins the I/O thread unplug() ended
+        with self._mutex:
+            self._parser = k.FrameParser()
+        self.start()
+
+    def _remove_link(self) -> None:
+        if self._link is not None and self._link.is_symlink():
+            self._link.unlink(missing_ok=True)
 
     # ------------------------------------------------------------------ test controls
     def set_sensors(self, **values: object) -> None:
@@ -115,6 +212,16 @@ class KobukiFake(PtyDevice):
             raise ValueError(f"unknown sensor field(s) {sorted(bad)}; expected some of {sorted(allowed)}")
         with self._mutex:
             self.state = replace(self.state, **values)  # type: ignore[arg-type]
+
+    def set_fault(self, name: str, active: bool = True) -> None:
+        """Raise (or clear) one safety condition by name: ``bumper_left``, ``cliff_centre``,
+        ``wheel_drop_right``, ``overcurrent_left``, ... (see :data:`SAFETY_BITS`)."""
+        if name not in SAFETY_BITS:
+            raise ValueError(f"unknown Kobuki fault {name!r}; expected one of {sorted(SAFETY_BITS)}")
+        fld, bit = SAFETY_BITS[name]
+        with self._mutex:
+            bits = getattr(self.state, fld)
+            setattr(self.state, fld, (bits | bit) if active else (bits & ~bit))
 
     def set_counters(self, *, encoders: int | None = None, timestamp_ms: int | None = None) -> None:
         """Jump both encoders and / or the timestamp (e.g. to 65530 to test wrap-around)."""
@@ -132,6 +239,17 @@ class KobukiFake(PtyDevice):
         """Send the next ``n`` frames with a wrong checksum."""
         with self._mutex:
             self._corrupt += n
+
+    def corrupt_stream(self, on: bool = True) -> None:
+        """Send every frame with a wrong checksum from now on (noise, wrong baud rate,
+        a failing cable) until ``corrupt_stream(False)``. The robot still hears commands."""
+        with self._mutex:
+            self._corrupt_all = on
+
+    def drop_next(self, n: int = 1) -> None:
+        """Stamp the next ``n`` frames but do not send them (lost on the wire)."""
+        with self._mutex:
+            self._drop += n
 
     def truncate_next(self, n: int = 1) -> None:
         """Send only the first half of the next ``n`` frames."""
@@ -185,6 +303,7 @@ class KobukiFake(PtyDevice):
         if c.kind == "base_control":
             s.speed, s.radius = int(c.values[0]), int(c.values[1])
             s.base_control_frames += 1
+            s.moving_commands += s.speed != 0
         elif c.kind == "request_extra":
             flags = int(c.values[0])
             s.requests.append(flags)
@@ -206,13 +325,21 @@ class KobukiFake(PtyDevice):
     def on_tick(self, now: float) -> None:
         with self._mutex:
             frame = self._step(0.02)
+            if self.mute or self._drop:
+                if not self.mute:
+                    self._drop -= 1
+                self.state.frames_dropped += 1
+                return
             stray, self._stray = self._stray, b""
             if self._truncate:
                 self._truncate -= 1
                 frame = frame[: len(frame) // 2]
-            elif self._corrupt:
-                self._corrupt -= 1
+                self.state.frames_corrupted += 1
+            elif self._corrupt or self._corrupt_all:
+                self._corrupt = max(0, self._corrupt - 1)
                 frame = frame[:-1] + bytes((frame[-1] ^ 0x5A,))
+                self.state.frames_corrupted += 1
+            self.state.frames_sent += 1
         self.send(stray + frame)
 
     def _step(self, dt: float) -> bytes:

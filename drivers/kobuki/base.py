@@ -22,8 +22,11 @@ class KobukiBase(Base):
 
     Limits come from the device's config (at most 0.7 m/s, pi rad/s). A velocity is
     held for ``command_timeout`` seconds; while a fault is active (bumper, cliff, wheel
-    drop, overcurrent, link lost, unsupported firmware) :meth:`set_velocity` drives
-    nothing and :meth:`state` names the fault in ``faults``: skills check it there.
+    drop, overcurrent, ``link_lost``, ``driver_error``, unsupported firmware)
+    :meth:`set_velocity` drives nothing and :meth:`state` names the fault in ``faults``:
+    skills check it there. Without a link :meth:`state` reports v = w = 0 (nothing is
+    measured; the driver is sending stop frames), so a brake loop does not wait on a
+    stale speed.
     """
 
     radius = 0.178  # m, Kobuki body radius
@@ -51,7 +54,7 @@ class KobukiBase(Base):
         return self.device.base_state()
 
     def set_velocity(self, v: float, w: float) -> None:
-        """Command ``v`` [m/s], ``w`` [rad/s] (clamped, ramped, held 0.6 s).
+        """Command ``v`` [m/s], ``w`` [rad/s] (clamped, ramped, held ``command_timeout`` s).
 
         Raises :class:`CapabilityError` only when the driver was never connected or was
         closed (a programming error); faults are reported through :meth:`state`.

@@ -1,10 +1,10 @@
 """Kobuki device: the serial link, its I/O thread, safety logic and odometry.
 
 :class:`KobukiDevice` composes :mod:`.codec` with :class:`~mmexec.drivers.transport.SerialTransport`.
-Nothing happens in ``__init__``; :meth:`KobukiDevice.connect` opens the port, starts
-the I/O thread and waits (bounded) for the stream and the version answer.
+Nothing happens in ``__init__``; :meth:`KobukiDevice.connect` opens the port, sends a
+stop frame, starts the I/O thread and waits (bounded) for the stream and the version answer.
 
-The I/O thread, per feedback frame (50 Hz, the robot's cadence):
+The I/O thread, per valid feedback frame (50 Hz, the robot's cadence):
 
 1. decodes it; updates sensors, faults and odometry (encoder distance, gyro or
    encoder heading);
@@ -17,9 +17,15 @@ The I/O thread, per feedback frame (50 Hz, the robot's cadence):
 4. sends one Base Control frame (vendor cadence), plus Request Extra until the
    versions and unique id arrive, plus any queued command (sound, LEDs, gains).
 
-No byte for ``liveness_timeout`` seconds is the ``link_lost`` fault: the target is
-zeroed, and it clears when bytes come back. A port that fails (cable pulled) ends
-the thread with ``link_lost`` latched; :meth:`reconnect` starts again.
+Liveness means *valid* frames: bytes that never form a valid, decodable frame (noise,
+wrong baud rate) are no sign of life. No valid frame for ``link_timeout`` seconds is the
+``link_lost`` fault: the output is zeroed, state() reports v = w = 0 (nothing is
+measured any more), and the thread writes a stop frame (speed 0) every 20 ms on its own,
+whatever arrives, until the link is back (:data:`RECOVERY_FRAMES` consecutive valid
+frames) or :meth:`close`. A port that fails (cable pulled) latches ``link_lost``; the
+thread then reopens the port every 0.1 s and, once it is back, writes stop frames again
+until :meth:`reconnect` or :meth:`close`. An unexpected error in the thread is the
+``driver_error`` fault, with stop frames every 20 ms until :meth:`close`.
 Link timing uses ``time.monotonic()``; the command watchdog and state stamps use
 the injected :class:`~mmexec.drivers.interfaces.Clock`.
 """
@@ -39,6 +45,9 @@ from mmexec.drivers.kobuki import codec as k
 from mmexec.drivers.transport import LinkError, SerialSettings, SerialTransport
 
 __all__ = [
+    "COMMAND_TIMEOUT_RANGE",
+    "LINK_TIMEOUT_RANGE",
+    "RECOVERY_FRAMES",
     "SUPPORTED_FIRMWARE_MAJOR",
     "KobukiConfig",
     "KobukiCorruptFrames",
@@ -48,8 +57,10 @@ __all__ = [
     "KobukiInfo",
     "KobukiLinkError",
     "KobukiNotConnected",
+    "KobukiPortError",
     "KobukiTimeout",
     "LinkState",
+    "LinkStats",
 ]
 
 log = logging.getLogger(__name__)
@@ -60,6 +71,19 @@ SPEC_MAX_LINEAR = 0.7  # m/s
 SPEC_MAX_ANGULAR = math.pi  # rad/s
 _EXTRA_FLAGS = k.REQUEST_HARDWARE | k.REQUEST_FIRMWARE | k.REQUEST_UID
 _DEFAULT_GP_OUTPUT = 0x00F0  # all power rails on, LEDs off (vendor driver's start value)
+_PERIOD = 0.02  # s, the Kobuki's feedback period (50 Hz); also the cadence of lone stop frames
+_STOP_FRAME = k.encode_frame(k.base_control(0, 0))
+_FINAL_STOPS = 3  # stop frames close() writes back to back (one may be lost on a noisy line)
+_REOPEN_PERIOD = 0.1  # s between attempts to reopen a port that failed
+_JOIN_TIMEOUT = 2.0  # s close() waits for the I/O thread (its longest step, a write, is <= 1 s)
+#: consecutive valid frames (0.1 s of clean stream) that end a ``link_lost``
+RECOVERY_FRAMES = 5
+#: [s] accepted ``link_timeout``: at least two feedback periods (one lost frame is no loss
+#: of link), at most 0.5 s (0.35 m driven blind at the spec's 0.7 m/s)
+LINK_TIMEOUT_RANGE = (0.04, 0.5)
+#: [s] accepted ``command_timeout``: longer than a 20 Hz tick, at most 1 s (the vendor uses 0.6)
+COMMAND_TIMEOUT_RANGE = (0.05, 1.0)
+_SETUP_TIMEOUT_MAX = 60.0  # s, connect_timeout and version_timeout
 
 
 # --------------------------------------------------------------------------- errors
@@ -80,6 +104,10 @@ class KobukiLinkError(KobukiError):
         super().__init__(f"kobuki on {port}: {message}")
         self.port = port
         self.detail = message
+
+
+class KobukiPortError(KobukiLinkError):
+    """The port cannot be opened: no such port, permission denied, busy."""
 
 
 class KobukiTimeout(KobukiLinkError):
@@ -120,24 +148,34 @@ class KobukiConfig:
     angular_accel: float = 3.5       # rad/s^2
     decel_factor: float = 1.2        # deceleration limit = factor x acceleration limit
     command_timeout: float = 0.6     # s without a new velocity -> zero
-    liveness_timeout: float = 0.1    # s without a byte -> link_lost
+    link_timeout: float = 0.1        # s without a valid frame -> link_lost, stop frames
     connect_timeout: float = 0.5     # s to see the first valid frame
     version_timeout: float = 1.0     # s to get the firmware version after that
     gyro_heading: bool = True        # heading from the factory-calibrated gyro (id 4)
 
     def validate(self) -> list[str]:
-        """Problems with these values ([] when fine)."""
+        """Problems with these values ([] when fine). Every number must be finite: an
+        infinite timeout would disable the watchdog it sets."""
         out = []
         if not 0.0 < self.max_linear <= SPEC_MAX_LINEAR:
             out.append(f"max_linear: {self.max_linear} m/s outside (0, {SPEC_MAX_LINEAR}]")
         if not 0.0 < self.max_angular <= SPEC_MAX_ANGULAR + 1e-9:
             out.append(f"max_angular: {self.max_angular} rad/s outside (0, pi]")
-        for name in ("linear_accel", "angular_accel", "command_timeout", "liveness_timeout",
-                     "connect_timeout", "version_timeout"):
-            if not getattr(self, name) > 0.0:
-                out.append(f"{name}: must be > 0, got {getattr(self, name)}")
-        if self.decel_factor < 1.0:
-            out.append(f"decel_factor: must be >= 1, got {self.decel_factor}")
+        for name in ("linear_accel", "angular_accel"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                out.append(f"{name}: must be a finite number > 0, got {value}")
+        for name, (lo, hi), why in (
+            ("command_timeout", COMMAND_TIMEOUT_RANGE, "a velocity older than this becomes zero"),
+            ("link_timeout", LINK_TIMEOUT_RANGE, "no valid frame for this long stops the base"),
+            ("connect_timeout", (_PERIOD, _SETUP_TIMEOUT_MAX), "wait for the first valid frame"),
+            ("version_timeout", (_PERIOD, _SETUP_TIMEOUT_MAX), "wait for the version answer"),
+        ):
+            value = getattr(self, name)
+            if not lo <= value <= hi:  # False for NaN as well
+                out.append(f"{name}: must be {lo:g}..{hi:g} s ({why}), got {value}")
+        if not (math.isfinite(self.decel_factor) and self.decel_factor >= 1.0):
+            out.append(f"decel_factor: must be a finite number >= 1, got {self.decel_factor}")
         if self.baudrate != 115200:
             out.append(f"baudrate: the Kobuki talks at 115200 baud, got {self.baudrate}")
         return out
@@ -157,6 +195,27 @@ class KobukiInfo:
     @property
     def unique_id_text(self) -> str:
         return "-".join(f"{x:08X}" for x in self.unique_id) if self.unique_id else "unknown"
+
+
+@dataclass(frozen=True)
+class LinkStats:
+    """Feedback link quality since :meth:`KobukiDevice.connect`, in frames."""
+
+    frames: int   # valid feedback frames
+    corrupt: int  # rejected: bad checksum, impossible length, malformed sub-payloads
+    lost: int     # stamped by the base (every 20 ms) but never arrived, not even corrupt
+    late: int     # valid frames that came more than link_timeout after the previous one
+
+    @property
+    def expected(self) -> int:
+        """Frames the base sent, as far as the host can tell."""
+        return self.frames + self.corrupt + self.lost
+
+    @property
+    def error_ratio(self) -> float:
+        """(corrupt + lost + late) / expected; 0 when nothing was expected."""
+        n = self.expected
+        return (self.corrupt + self.lost + self.late) / n if n else 0.0
 
 
 class LinkState(enum.Enum):
@@ -199,7 +258,10 @@ class KobukiDevice:
         self._controller: k.ControllerInfo | None = None
         self._malformed = 0
         self._sensor_faults: frozenset[str] = frozenset()
-        self._link_lost = False
+        self._link_lost = False       # no valid frame for link_timeout (clears on recovery)
+        self._good_run = 0            # consecutive valid frames while link_lost
+        self._rejected = 0            # frames rejected so far (parser + malformed)
+        self._driver_error = ""       # the I/O thread failed: latched until close()
         self._firmware_bad = False
         self._target = (0.0, 0.0)
         self._target_stamp = -math.inf
@@ -207,7 +269,9 @@ class KobukiDevice:
         self._measured = (0.0, 0.0)
         self._stamp = 0.0
         self._last_ts: int | None = None
-        self._last_byte = time.monotonic()
+        self._last_valid = time.monotonic()
+        self._gap_frames = 0          # frames missing between valid frames' timestamps
+        self._late = 0
         self._queue: list[bytes] = []
         self._gp_output = _DEFAULT_GP_OUTPUT
         self._refused_logged = False
@@ -228,9 +292,10 @@ class KobukiDevice:
         """Open the port, start streaming, check the firmware. Blocks at most
         ``connect_timeout + version_timeout`` seconds (setup only, never on a tick).
 
-        Raises :class:`KobukiLinkError` (no such port, permission, busy),
-        :class:`KobukiTimeout` (no answer), :class:`KobukiCorruptFrames`,
-        :class:`KobukiFirmwareError`; the port is closed again on any of them.
+        Raises :class:`KobukiPortError` (no such port, permission, busy),
+        :class:`KobukiLinkError` (the port failed), :class:`KobukiTimeout` (no answer),
+        :class:`KobukiCorruptFrames`, :class:`KobukiFirmwareError`; the port is closed
+        again on any of them.
         """
         with self._lock:
             if self._thread is not None:
@@ -240,20 +305,27 @@ class KobukiDevice:
             self._versions.clear()
             try:
                 self._transport.open()
+            except LinkError as e:
+                self._transport.close()
+                raise KobukiPortError(self.port, e.detail) from e
+            try:
                 self._transport.reset_input()
+                # a base left driving (a crashed host, a previous run) stops now, even if
+                # its feedback never becomes valid
+                self._transport.write(_STOP_FRAME)
             except LinkError as e:
                 self._transport.close()
                 raise KobukiLinkError(self.port, e.detail) from e
             self._link = LinkState.CONNECTING
             self._stop.clear()
-            self._last_byte = time.monotonic()
+            self._last_valid = time.monotonic()
             self._thread = threading.Thread(target=self._run, name=f"kobuki-io {self.port}", daemon=True)
             self._thread.start()
         try:
             cfg = self.config
             if not self._first_frame.wait(cfg.connect_timeout):
                 with self._lock:
-                    err, bad = self._error, self._parser.bad_checksum + self._parser.bad_length + self._malformed
+                    err, bad = self._error, self._rejected_locked()
                     seen = self._parser.discarded + self._parser.pending
                 if err:
                     raise KobukiLinkError(self.port, err)
@@ -279,16 +351,20 @@ class KobukiDevice:
         return self.info()
 
     def close(self) -> None:
-        """Send zero velocity, stop the I/O thread, close the port. Idempotent."""
+        """Zero the output, stop the I/O thread (bounded: 2 s), write stop frames, close
+        the port. Idempotent."""
         with self._lock:
-            self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+            self._zero_locked()
             t, self._thread = self._thread, None
         self._stop.set()
         if t is not None and t is not threading.current_thread():
-            t.join(timeout=2.0)
+            t.join(_JOIN_TIMEOUT)
+            if t.is_alive():
+                log.error("kobuki on %s: the I/O thread did not stop within %g s; closing the port under it",
+                          self.port, _JOIN_TIMEOUT)
         if self._transport.is_open:
             try:
-                self._transport.write(k.encode_frame(k.base_control(0, 0)))
+                self._transport.write(_STOP_FRAME * _FINAL_STOPS)
             except LinkError as e:
                 log.warning("kobuki on %s: could not send the final stop: %s", self.port, e.detail)
         self._transport.close()
@@ -313,8 +389,18 @@ class KobukiDevice:
             return KobukiInfo(
                 self._firmware, self._hardware, self._uid,
                 self._core.battery if self._core else None,
-                self._parser.frames, self._parser.bad_checksum + self._parser.bad_length + self._malformed,
+                self._parser.frames, self._rejected_locked(),
             )
+
+    def link_stats(self) -> LinkStats:
+        """Feedback link quality since :meth:`connect` (see :class:`LinkStats`)."""
+        with self._lock:
+            corrupt = self._rejected_locked()
+            return LinkStats(self._parser.frames - self._malformed, corrupt,
+                             max(0, self._gap_frames - corrupt), self._late)
+
+    def _rejected_locked(self) -> int:
+        return self._parser.bad_checksum + self._parser.bad_length + self._malformed
 
     @property
     def faults(self) -> frozenset[str]:
@@ -326,6 +412,8 @@ class KobukiDevice:
         f = set(self._sensor_faults)
         if self._link_lost or self._link is LinkState.LOST:
             f.add("link_lost")
+        if self._driver_error:
+            f.add("driver_error")
         if self._firmware_bad:
             f.add("firmware_unsupported")
         return frozenset(f)
@@ -362,11 +450,17 @@ class KobukiDevice:
             self._target_stamp = self.clock.now()
 
     def base_state(self) -> BaseState:
-        """Odometry pose, measured (v, w), stamp of the last frame, faults."""
+        """Odometry pose, measured (v, w), clock stamp of the last valid frame, faults.
+
+        Without a link (``link_lost``, ``driver_error``) nothing is measured: v and w are
+        reported as 0, the value the driver is commanding with its stop frames, instead of
+        the last measurement going stale; the pose and ``stamp`` stay at the last valid
+        frame."""
         with self._lock:
+            blind = self._link_lost or self._link is LinkState.LOST or bool(self._driver_error)
+            v, w = (0.0, 0.0) if blind else self._measured
             return BaseState(
-                Pose2D(self._odom.x, self._odom.y, self._odom.theta),
-                self._measured[0], self._measured[1], self._stamp, self._faults_locked(),
+                Pose2D(self._odom.x, self._odom.y, self._odom.theta), v, w, self._stamp, self._faults_locked(),
             )
 
     def reset_odometry(self, pose: Pose2D | None = None) -> None:
@@ -434,45 +528,109 @@ class KobukiDevice:
             self._queue.append(sub)
 
     # ------------------------------------------------------------------ I/O thread
+    def _zero_locked(self) -> None:
+        self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+
     def _run(self) -> None:
-        cfg = self.config
-        while not self._stop.is_set():
-            try:
-                data = self._transport.wait_readable(0.02)
-            except LinkError as e:
-                self._lost(f"link failed: {e.detail}")
-                return
-            now = time.monotonic()
+        try:
+            self._serve()
+        except Exception as e:  # a bug in here must not leave the base driving
+            log.exception("kobuki on %s: the I/O thread failed; sending stop frames until close()", self.port)
             with self._lock:
-                if data:
-                    self._last_byte = now
-                    if self._link_lost:
-                        log.info("kobuki on %s: bytes again, link back", self.port)
-                        self._link_lost = False
-                elif now - self._last_byte > cfg.liveness_timeout and not self._link_lost:
-                    log.warning("kobuki on %s: no byte for %.0f ms: link lost", self.port, cfg.liveness_timeout * 1e3)
-                    self._link_lost = True
-                    self._target, self._out = (0.0, 0.0), (0.0, 0.0)
-                payloads = self._parser.feed(data) if data else []
-            for payload in payloads:
-                frame = self._on_frame(payload)
-                if frame is None:
-                    continue
-                try:
+                self._driver_error = self._error = f"driver error: {type(e).__name__}: {e}"
+                self._zero_locked()
+            self._send_stops_until_closed()
+
+    def _serve(self) -> None:
+        """Read, answer each valid frame, and keep the link deadline (see module doc)."""
+        next_stop = 0.0
+        while not self._stop.is_set():
+            if not self._transport.is_open and not self._reopen():
+                self._stop.wait(_REOPEN_PERIOD)
+                continue
+            try:
+                data = self._transport.wait_readable(_PERIOD)
+                now = time.monotonic()
+                replies = self._receive(data, now)
+                if self._link_deadline(now) and now >= next_stop:
+                    replies.append(_STOP_FRAME)
+                    next_stop = now + _PERIOD
+                for frame in replies:
                     self._transport.write(frame)
-                except LinkError as e:
-                    self._lost(f"link failed: {e.detail}")
-                    return
+            except LinkError as e:
+                self._port_failed(e.detail)
 
-    def _lost(self, why: str) -> None:
-        log.error("kobuki on %s: %s", self.port, why)
+    def _receive(self, data: bytes, now: float) -> list[bytes]:
+        """Parse ``data``; the command frames that answer its valid frames."""
         with self._lock:
-            self._error = why
-            self._link = LinkState.LOST
-            self._target, self._out = (0.0, 0.0), (0.0, 0.0)
+            payloads = self._parser.feed(data) if data else []
+        replies = []
+        for payload in payloads:
+            frame = self._on_frame(payload, now)
+            if frame is not None:
+                replies.append(frame)
+        with self._lock:
+            rejected = self._rejected_locked()
+            if rejected != self._rejected:
+                self._rejected, self._good_run = rejected, 0
+        return replies
 
-    def _on_frame(self, payload: bytes) -> bytes | None:
-        """Handle one feedback payload; return the command frame to send."""
+    def _link_deadline(self, now: float) -> bool:
+        """Raise ``link_lost`` when no valid frame came for ``link_timeout``; True while
+        stop frames are due regardless of feedback (lost link, failed port, or a port
+        that has not yet delivered a valid frame for that long)."""
+        cfg = self.config
+        with self._lock:
+            if self._link is LinkState.LOST:
+                return True
+            silent_for = now - self._last_valid
+            if silent_for <= cfg.link_timeout:
+                return self._link_lost
+            if self._link is LinkState.STREAMING and not self._link_lost:
+                log.warning("kobuki on %s: no valid frame for %.0f ms (%d rejected so far): link lost, "
+                            "sending stop frames", self.port, silent_for * 1e3, self._rejected_locked())
+                self._link_lost = True
+                self._good_run = 0
+                self._zero_locked()
+            return True
+
+    def _port_failed(self, detail: str) -> None:
+        """The port failed (cable pulled): latch ``link_lost`` until :meth:`reconnect`."""
+        with self._lock:
+            first = self._link is not LinkState.LOST
+            self._error = f"link failed: {detail}"
+            self._link = LinkState.LOST
+            self._zero_locked()
+        self._transport.close()
+        if first:
+            log.error("kobuki on %s: link failed: %s; reopening the port every %g s to send stop frames "
+                      "(reconnect() to drive again)", self.port, detail, _REOPEN_PERIOD)
+
+    def _reopen(self) -> bool:
+        """Try to open the port again after a failure; True once it is open."""
+        try:
+            self._transport.open()
+        except LinkError as e:
+            log.debug("kobuki on %s: port still unavailable: %s", self.port, e.detail)
+            return False
+        with self._lock:
+            self._parser.reset()
+        log.warning("kobuki on %s: the port is back: sending stop frames (link_lost stays until reconnect())",
+                    self.port)
+        return True
+
+    def _send_stops_until_closed(self) -> None:
+        """After a driver error: a stop frame every period until :meth:`close`."""
+        while not self._stop.wait(_PERIOD):
+            try:
+                self._transport.write(_STOP_FRAME)
+            except LinkError as e:
+                log.error("kobuki on %s: cannot send stop frames any more: %s", self.port, e.detail)
+                return
+
+    def _on_frame(self, payload: bytes, now: float) -> bytes | None:
+        """Handle one feedback payload that arrived at ``now`` (time.monotonic()); return
+        the command frame to send."""
         try:
             fb = k.decode_feedback(payload)
         except k.CodecError as e:
@@ -482,6 +640,7 @@ class KobukiDevice:
             return None
         cfg = self.config
         with self._lock:
+            self._on_valid_frame_locked(now)
             self._feedback = fb
             self._stamp = self.clock.now()
             if fb.firmware is not None and self._firmware is None:
@@ -502,6 +661,7 @@ class KobukiDevice:
                 self._core = core
                 if self._last_ts is not None:
                     dt = ((core.timestamp_ms - self._last_ts) & 0xFFFF) / 1000.0
+                    self._gap_frames += max(0, round(dt / _PERIOD) - 1)
                 self._last_ts = core.timestamp_ms
                 heading = fb.inertia.heading if (cfg.gyro_heading and fb.inertia is not None) else None
                 step = self._odom.update(core.left_encoder, core.right_encoder, core.timestamp_ms, heading)
@@ -535,6 +695,18 @@ class KobukiDevice:
         if self._firmware is not None and (not need_versions or self._firmware_bad):
             self._versions.set()
         return k.encode_frame(*subs)
+
+
+    def _on_valid_frame_locked(self, now: float) -> None:
+        """Liveness bookkeeping for a valid frame: late count, ``link_lost`` recovery."""
+        if self._link is LinkState.STREAMING and now - self._last_valid > self.config.link_timeout:
+            self._late += 1
+        self._last_valid = now
+        if self._link_lost and self._link is not LinkState.LOST:
+            self._good_run += 1
+            if self._good_run >= RECOVERY_FRAMES:
+                log.info("kobuki on %s: %d valid frames in a row: link back", self.port, self._good_run)
+                self._link_lost = False
 
 
 def _ramp(current: float, target: float, accel: float, decel_factor: float, dt: float) -> float:
