@@ -28,14 +28,13 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from mmexec.config.brokenpipe import detach_stdout
 from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
 from mmexec.executive.runner import ArgMark, BackendStartError
 
 __all__ = ["main"]
 
 EXIT_OK, EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
-#: Standard output was closed by its reader (128 + SIGPIPE, what a Unix tool killed by it reports).
-EXIT_BROKEN_PIPE = 141
 
 #: The requests ``mmexec demo`` serves (markers of the lab's boxes 3 and 5).
 DEMO_REQUESTS: tuple[dict[str, str], ...] = ({"item": "3"}, {"item": "5"})
@@ -489,19 +488,6 @@ def _cmd_hw(rest: Sequence[str]) -> int:
 _CURRENT_LOG: list[Path | None] = [None]
 
 
-def _stdout_gone() -> int:
-    """Standard output's reader went away (``mmexec log replay ... | head``): point file
-    descriptor 1 at /dev/null, so the interpreter's last flush of what is still buffered
-    cannot fail again, and return :data:`EXIT_BROKEN_PIPE` without a word (the user
-    closed the pipe on purpose)."""
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, sys.stdout.fileno())
-    finally:
-        os.close(devnull)
-    return EXIT_BROKEN_PIPE
-
-
 def _dispatch(argv: list[str]) -> int:
     if argv and argv[0] == "hw":
         return _cmd_hw(argv[1:])
@@ -538,8 +524,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = _dispatch(args)
         sys.stdout.flush()  # a reader that went away (`| head`) shows up here, not at exit
         return code
-    except BrokenPipeError:
-        return _stdout_gone()
+    except BrokenPipeError:  # stdout's reader went away (`| head`): exit quietly
+        return detach_stdout()
     except InputError as e:
         for p in e.problems:
             print(str(p), file=sys.stderr)

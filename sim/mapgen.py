@@ -16,12 +16,17 @@ which also prints the ``robot.scene`` list of ``config/locobot.yaml`` and
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 import math
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
+from mmexec.config.brokenpipe import detach_stdout
+from mmexec.config.yamlload import InputError, Mark
 from mmexec.drivers.interfaces import OccupancyGrid
 from mmexec.sim.world import World, load_world
 
@@ -101,24 +106,82 @@ def scene_yaml(world: World | str | Path, indent: int = 4) -> str:
     return "\n".join(out) + "\n"
 
 
+#: How the command is run (its name in usage and error lines).
+PROG = "python -m mmexec.sim.mapgen"
+#: Exit codes: written, bad input (one line on stderr); stdout's reader went away is
+#: :data:`~mmexec.config.brokenpipe.EXIT_BROKEN_PIPE` (141), as for ``mmexec``.
+EXIT_OK, EXIT_INPUT = 0, 2
+
+
+class _ArgMark(Mark):
+    """A command-line argument as an error location, printed as its name."""
+
+    __slots__ = ()
+
+    def __str__(self) -> str:
+        return self.file
+
+
+class _UsageError(Exception):
+    """A bad command line (one line, exit 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise _UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = _Parser(prog=PROG, description="Write a world's occupancy grid as a map_server map (YAML + PGM) and "
+                                       "print its static boxes as robot.scene lines of a run config.")
+    p.add_argument("world", nargs="?", default="lab", metavar="WORLD",
+                   help="a shipped world's name or a world .yaml file (default lab)")
+    p.add_argument("out", nargs="?", type=Path, metavar="OUT.yaml",
+                   help="the map's YAML; the PGM goes beside it (default config/maps/WORLD.yaml)")
+    return p
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m mmexec.sim.mapgen [WORLD] [OUT.yaml]``: write the map, print the scene."""
-    args = sys.argv[1:] if argv is None else argv
-    name = args[0] if args else "lab"
-    out = Path(args[1]) if len(args) > 1 else Path("config/maps") / f"{Path(name).stem}.yaml"
-    world = _world(name)
+    """``python -m mmexec.sim.mapgen [WORLD] [OUT.yaml]``: write the map, print the scene.
+    Returns the exit code: 0 written, 2 bad input (one line per problem on stderr: an
+    unknown world, a world file's problems as FILE:LINE:COL, an OUT that is not a
+    writable .yaml path), 141 when stdout's reader went away (quietly)."""
+    try:
+        args = _parser().parse_args(sys.argv[1:] if argv is None else argv)
+    except _UsageError as e:
+        print(e, file=sys.stderr)
+        return EXIT_INPUT
+    except SystemExit as e:  # --help printed the usage
+        return int(e.code or 0)
+    out: Path = args.out if args.out is not None else Path("config/maps") / f"{Path(args.world).stem}.yaml"
+    if out.suffix not in (".yaml", ".yml") or out.is_dir():
+        print(f"{PROG}: OUT {str(out)!r}: expected a .yaml file path (the .pgm is written beside it)", file=sys.stderr)
+        return EXIT_INPUT
+    try:
+        world = load_world(args.world, randomize=False, mark=_ArgMark("mapgen WORLD", 0, 0))
+    except InputError as e:
+        for problem in e.problems:
+            print(problem, file=sys.stderr)
+        return EXIT_INPUT
     grid = world.occupancy(0.05)
     source = Path(world.source)
-    try:
+    with contextlib.suppress(ValueError):  # a world outside the package keeps its own path
         source = source.resolve().relative_to(Path(__file__).resolve().parents[1])
-    except ValueError:
-        pass
-    yaml_path, pgm_path = write_map(grid, out, comment=(
-        f"world {world.name!r} ({source.as_posix()}) at its nominal poses, written by mmexec.sim.mapgen"))
+    try:
+        yaml_path, pgm_path = write_map(grid, out, comment=(
+            f"world {world.name!r} ({source.as_posix()}) at its nominal poses, written by mmexec.sim.mapgen"))
+    except OSError as e:  # FileExistsError: mkdir met a file where a folder of OUT belongs
+        why = "not a folder" if isinstance(e, FileExistsError) else e.strerror or str(e)
+        print(f"{PROG}: {e.filename or out}: cannot write: {why}", file=sys.stderr)
+        return EXIT_INPUT
     print(f"wrote {yaml_path} and {pgm_path} ({grid.width} x {grid.height} cells)", file=sys.stderr)
-    print("  scene:  # static boxes in map for arm planning: name, size [m], xyz centre [m], rpy [rad]")
-    print(scene_yaml(world), end="")
-    return 0
+    try:
+        print("  scene:  # static boxes in map for arm planning: name, size [m], xyz centre [m], rpy [rad]")
+        print(scene_yaml(world), end="")
+        sys.stdout.flush()
+    except BrokenPipeError:  # stdout's reader went away (`| head`): exit quietly
+        return detach_stdout()
+    return EXIT_OK
 
 
 if __name__ == "__main__":

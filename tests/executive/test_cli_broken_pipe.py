@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from mmexec.executive.cli import EXIT_BROKEN_PIPE
+from mmexec.config.brokenpipe import EXIT_BROKEN_PIPE
 
 MMEXEC = Path(sys.executable).with_name("mmexec")
 
