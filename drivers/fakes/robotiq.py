@@ -4,8 +4,12 @@ Users rehearse bring-up with these (``mmexec hw fake robotiq``) and the tests dr
 driver against them. Both share :class:`GripperModel`, a small model of the gripper's
 firmware built from hardware-protocols.md section 3:
 
-* states reset (gSTA 0), activating (gSTA 1 for ``activation_time`` s, fingers travel to
-  open) and activated (gSTA 3);
+* states reset (gSTA 0), activating (gSTA 1) and activated (gSTA 3). Activation takes
+  ``activation_time`` s of gripper time (default 2 s: "seconds, not milliseconds" in the
+  vendor sequence of hardware-protocols.md 3.3; the exact figure is not published), during
+  which the fingers travel fully: closed in the first half, back open in the second
+  (gPO shows it). ``activation_time = math.inf`` is an activation that never completes;
+  lowering it later lets a held activation finish;
 * finger motion toward rPR at the speed rSP stands for (0.02..0.15 m/s over the 85 mm
   stroke), gCU while moving or squeezing, gPR echoing the accepted rPR;
 * an optional object between the fingers (``object_width`` [m]) that stops them while
@@ -15,8 +19,10 @@ firmware built from hardware-protocols.md section 3:
   rGTO toggled 0 then 1;
 * faults with their recovery rules: 0x05 when rGTO arrives during activation (the move
   then runs once activation ends), 0x07 when rGTO is set with rACT = 0, 0x08 while
-  ``temperature`` >= 85 C (clears below 80 C), 0x09 after ``comm_timeout`` s without a
-  request (clears with the next request), major faults 0x0A / 0x0C / 0x0E injected with
+  ``temperature`` >= 85 C (clears below 80 C), 0x09 "no communication" once an activated
+  gripper has had no request for more than ``comm_timeout`` s (1 s, the vendor's figure);
+  traffic clears it, the first ``comm_fault_answers`` answers (default 1) still reporting
+  it (whether the very first answer does is unconfirmed, so it is a switch), major faults 0x0A / 0x0C / 0x0E injected with
   :meth:`GripperModel.inject_fault` and 0x0D when ``activation_fault`` is set; majors stay
   until rACT goes 0 then 1; automatic release (rATR) gives 0x0B, then 0x0F.
 
@@ -56,18 +62,21 @@ _MAJOR = frozenset(c for c, (info, _) in FAULTS.items() if info.fault_class == "
 
 class GripperModel:
     """The gripper's firmware, stepped by the fakes. Thread-safe; times are
-    ``time.monotonic()`` seconds, scaled by ``time_scale``."""
+    ``time.monotonic()`` seconds, scaled by ``time_scale``; ``start`` is the time the
+    model begins at (default now; a test stepping it by hand passes its own)."""
 
     def __init__(
         self,
         *,
-        activation_time: float = 1.0,
+        activation_time: float = 2.0,
         time_scale: float = 1.0,
         object_width: float | None = None,
         outer_object_width: float | None = None,
         open_limit: int = 0,
         closed_limit: int = 255,
         comm_timeout: float = 1.0,
+        comm_fault_answers: int = 1,
+        start: float | None = None,
     ) -> None:
         if not 0 <= open_limit < closed_limit <= 255:
             raise ValueError("need 0 <= open_limit < closed_limit <= 255")
@@ -77,6 +86,8 @@ class GripperModel:
         self.outer_object_width = outer_object_width
         self.open_limit, self.closed_limit = open_limit, closed_limit
         self.comm_timeout = comm_timeout
+        self.comm_fault_answers = comm_fault_answers
+        self._comm_fault_left = 0
         self.activation_fault = False
         self.temperature = 35.0  # C
         self._lock = threading.RLock()
@@ -88,10 +99,12 @@ class GripperModel:
         self._moving = False
         self._releasing = False
         self._pending_move = False
-        self._act_until = 0.0
-        self._last = time.monotonic()
+        self._act_elapsed = 0.0  # gripper seconds since the rising edge on rACT
+        self._act_from = float(open_limit)
+        self._last = time.monotonic() if start is None else start
         self._last_rx = self._last
         self.writes: list[Command] = []
+        self.delayed_actions = 0  # moves requested during activation (each raised 0x05)
 
     # ------------------------------------------------------------------ observers
     def status(self) -> Status:
@@ -113,12 +126,15 @@ class GripperModel:
     # ------------------------------------------------------------------ fault switches
     def inject_fault(self, code: int) -> None:
         """Raise gFLT ``code``: 0x08 heats the gripper to 90 C (cool() clears it), 0x09
-        latches until the next request, majors stop the fingers until rACT 0 then 1."""
+        clears after ``comm_fault_answers`` answered requests, majors stop the fingers until
+        rACT 0 then 1."""
         with self._lock:
             if code == 0x08:
                 self.temperature = 90.0
             elif code not in _MAJOR and code != 0x09:
                 raise ValueError(f"cannot inject gFLT 0x{code:02X} (it follows from commands)")
+            if code == 0x09:
+                self._comm_fault_left = self.comm_fault_answers
             self._gFLT = code
             self._moving = False
 
@@ -138,15 +154,20 @@ class GripperModel:
 
     # ------------------------------------------------------------------ requests
     def touch(self, now: float) -> None:
-        """A request arrived (clears 0x09 after the answer, see :meth:`after_request`)."""
+        """A request arrived: traffic again (0x09 clears after the answers, see
+        :meth:`after_request`)."""
         with self._lock:
             self.step(now)
             self._last_rx = now
 
     def after_request(self) -> None:
+        """A request was answered: the ``comm_fault_answers``-th answer since traffic
+        resumed was the last to report 0x09."""
         with self._lock:
             if self._gFLT == 0x09:
-                self._gFLT = 0
+                self._comm_fault_left -= 1
+                if self._comm_fault_left <= 0:
+                    self._gFLT = 0
 
     def write(self, cmd: Command, now: float) -> None:
         """Apply new robot output bytes."""
@@ -169,7 +190,8 @@ class GripperModel:
                 self._gACT = True
                 self._gSTA = 1
                 self._gOBJ = 0
-                self._act_until = now + self.activation_time / self.time_scale
+                self._act_elapsed = 0.0
+                self._act_from = self._pos
                 self._moving = False
             if cmd.rATR:
                 if not self._releasing and self._gFLT != 0x0F:
@@ -189,6 +211,7 @@ class GripperModel:
             if self._gSTA == 1:
                 self._gFLT = 0x05
                 self._pending_move = True
+                self.delayed_actions += 1
                 return
             if self._gSTA == 3:
                 self._start_move(prev)
@@ -220,12 +243,26 @@ class GripperModel:
             if (self._gSTA == 3 and self._gFLT == 0
                     and (now - self._last_rx) * self.time_scale > self.comm_timeout):
                 self._gFLT = 0x09
-            if self._gSTA == 1 and now >= self._act_until:
-                self._finish_activation()
+                self._comm_fault_left = self.comm_fault_answers
+            if self._gSTA == 1:
+                self._step_activation(dt)
             if self._releasing:
                 self._step_release(dt)
             elif self._moving:
                 self._step_motion(dt)
+
+    def _step_activation(self, dt: float) -> None:
+        """Fingers travel fully while activating: to closed, then back to open."""
+        self._act_elapsed += dt
+        if self._act_elapsed >= self.activation_time:
+            self._finish_activation()
+            return
+        half = self.activation_time / 2
+        closed, opened = float(self.closed_limit), float(self.open_limit)
+        if self._act_elapsed < half:
+            self._pos = self._act_from + (closed - self._act_from) * self._act_elapsed / half
+        else:
+            self._pos = closed + (opened - closed) * (self._act_elapsed - half) / half
 
     def _finish_activation(self) -> None:
         if self.activation_fault:

@@ -113,7 +113,8 @@ def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
                         help="serve the URCap text protocol on 127.0.0.1 instead of Modbus")
     parser.add_argument("--tcp-port", type=int, default=0,
                         help="with --urcap: TCP port (default: a free one)")
-    parser.add_argument("--activation-time", type=float, default=1.0, help="seconds")
+    parser.add_argument("--activation-time", type=float, default=2.0,
+                        help="seconds of gripper time an activation takes (default %(default)s)")
     parser.add_argument("--object-width", type=float, default=None,
                         help="an object between the fingers [m] that stops them closing")
     parser.add_argument("--time-scale", type=float, default=1.0,

@@ -11,8 +11,14 @@ Threading: after :meth:`RobotiqDevice.open` only the I/O thread touches the link
 queue commands and read snapshots under one lock, so no public call blocks on I/O (except
 ``open`` and ``close``, which are setup and shutdown, never ticks).
 
-Goal deadlines and link deadlines use ``time.monotonic()``; state stamps use the injected
-:class:`~mmexec.drivers.interfaces.Clock`.
+Goal deadlines (activation, moves, stops) and state stamps read the injected
+:class:`~mmexec.drivers.interfaces.Clock` (the wall clock on the robot); only the link's own
+reply deadlines, which bound a wait on a port, are wall time.
+
+A move asked for while activation runs (the :meth:`RobotiqDevice.activate` goal, or a gripper
+reporting gSTA = 1) is not refused: its goal waits, nothing written, and the I/O thread
+starts it once gSTA = 3; it fails with one line if the activation fails or has not finished
+by the activation deadline. So a mission can close the gripper right after bring-up.
 """
 
 from __future__ import annotations
@@ -22,11 +28,17 @@ import collections
 import enum
 import logging
 import threading
-import time
 from dataclasses import dataclass
 from typing import Self
 
-from mmexec.drivers.interfaces import Clock, Goal, GraspState, GripperState, MonotonicClock
+from mmexec.drivers.interfaces import (
+    Clock,
+    Goal,
+    GoalState,
+    GraspState,
+    GripperState,
+    MonotonicClock,
+)
 from mmexec.drivers.robotiq import codec
 from mmexec.drivers.robotiq.codec import Command, Status
 from mmexec.drivers.robotiq.errors import (
@@ -87,10 +99,11 @@ class _Track:
     """A goal the I/O thread advances: its kind, the command it waits on, its deadline."""
 
     goal: Goal
-    kind: str          # "activate" | "move" | "release" | "stop"
+    kind: str          # "activate" | "pending" | "move" | "release" | "stop" | "reset"
     seq: int           # the goal's condition applies to readings taken after write #seq
     command: Command
-    deadline: float    # time.monotonic()
+    deadline: float    # clock seconds (self.clock)
+    after: Goal | None = None  # "pending": the activation the move waits for (None: gSTA = 1)
 
 
 class RobotiqDevice(abc.ABC):
@@ -296,19 +309,17 @@ class RobotiqDevice(abc.ABC):
             if st.activated and st.gFLT == 0 and not force_reset and not any(
                     t.kind == "release" for t in self._tracks):
                 return Goal.finished("robotiq.activate", self._state_locked())
-            self._supersede(("activate", "move", "release", "stop"), "superseded by activate()")
+            self._supersede(("activate", "pending", "move", "release", "stop"),
+                             "superseded by activate()")
             self._enqueue(Command())
             seq = self._enqueue(Command(rACT=True))
             goal = Goal("robotiq.activate", on_cancel=self._on_cancel)
             self._held = self._dropped = False
             self._tracks.append(_Track(goal, "activate", seq, Command(rACT=True),
-                                       time.monotonic() + self.settings.activation_timeout))
+                                       self.clock.now() + self.settings.activation_timeout))
             return goal
 
     def _ready_for_motion(self, st: Status) -> None:
-        if any(t.kind == "activate" for t in self._tracks):
-            raise RobotiqNotReady(f"{self.where}: activation in progress: wait for the "
-                                  "activate() goal to succeed")
         if st.gFLT and st.gFLT != 0x05:
             e = fault_error(st.gFLT, self.where)
             raise RobotiqNotReady(f"{e} (before moving)")
@@ -322,9 +333,12 @@ class RobotiqDevice(abc.ABC):
         The force is capped at ``settings.max_force`` whatever is asked. The goal succeeds
         when gPR echoes the request and gOBJ != 0; its result is the :class:`GripperState`
         then (``grasp`` tells whether an object stopped the fingers). It fails with the
-        named fault if the gripper reports one, or if the link fails. Raises
-        :class:`RobotiqNotReady` when the gripper cannot move now (not activated,
-        faulted, link down). A running move is cancelled ("superseded").
+        named fault if the gripper reports one, or if the link fails. While activation runs
+        (an :meth:`activate` goal, or gSTA = 1) the goal waits, nothing written, and starts
+        once gSTA = 3; it fails if the activation fails or is not done by its deadline.
+        Raises :class:`RobotiqNotReady` when the gripper cannot move now (not activated
+        and not activating, faulted, link down). A running or waiting move is cancelled
+        ("superseded").
         """
         for name, v in (("position", position), ("speed", speed), ("force", force)):
             if not isinstance(v, int) or not 0 <= v <= 255:
@@ -333,22 +347,36 @@ class RobotiqDevice(abc.ABC):
         cmd = Command(rACT=True, rGTO=True, rPR=position, rSP=speed, rFR=force)
         with self._lock:
             st = self._require_link()
-            self._ready_for_motion(st)
-            self._supersede(("move", "stop"), "superseded by a new move")
-            last = self._last_cmd
-            if last is not None and last.rGTO and last.rPR == position:
-                # a gripper stopped on an object only moves again for a new position, a
-                # higher force or rGTO toggled 0 then 1 (hardware-protocols.md 3.3)
-                self._enqueue(self._stop_command())
-            seq = self._enqueue(cmd)
-            self._move_cmd, self._move_seq = cmd, seq
-            self._held = self._dropped = False
-            stroke = abs(position - st.gPO) / 255 * codec.STROKE
-            duration = stroke / codec.raw_to_speed(speed)
+            activation = next((t for t in self._tracks if t.kind == "activate"), None)
+            waits = activation is not None or (st.gSTA == 1 and st.gACT)
+            if not waits:
+                self._ready_for_motion(st)
+            self._supersede(("pending", "move", "stop"), "superseded by a new move")
             goal = Goal("robotiq.move", on_cancel=self._on_cancel)
-            self._tracks.append(_Track(goal, "move", seq, cmd, time.monotonic() + 2 * duration
-                                       + self.settings.move_margin))
+            if activation is not None:
+                self._tracks.append(_Track(goal, "pending", activation.seq, cmd,
+                                           activation.deadline, after=activation.goal))
+            elif waits:
+                self._tracks.append(_Track(goal, "pending", self._queued_seq, cmd,
+                                           self.clock.now() + self.settings.activation_timeout))
+            else:
+                self._tracks.append(self._start_move(goal, cmd, st))
             return goal
+
+    def _start_move(self, goal: Goal, cmd: Command, st: Status) -> _Track:
+        """Queue the write of move ``cmd`` (lock held); the track that follows it."""
+        last = self._last_cmd
+        if last is not None and last.rGTO and last.rPR == cmd.rPR:
+            # a gripper stopped on an object only moves again for a new position, a
+            # higher force or rGTO toggled 0 then 1 (hardware-protocols.md 3.3)
+            self._enqueue(self._stop_command())
+        seq = self._enqueue(cmd)
+        self._move_cmd, self._move_seq = cmd, seq
+        self._held = self._dropped = False
+        stroke = abs(cmd.rPR - st.gPO) / 255 * codec.STROKE
+        duration = stroke / codec.raw_to_speed(cmd.rSP)
+        return _Track(goal, "move", seq, cmd,
+                      self.clock.now() + 2 * duration + self.settings.move_margin)
 
     def stop(self) -> None:
         """Stop the fingers where they are (rGTO = 0); running moves end CANCELLED. Never
@@ -356,6 +384,7 @@ class RobotiqDevice(abc.ABC):
         with self._lock:
             if self._link_state in (LinkState.CLOSED, LinkState.LOST):
                 return
+            self._supersede(("pending",), "cancelled: stopped before the move started")
             self._stop_locked()
 
     def _stop_locked(self) -> None:
@@ -363,7 +392,7 @@ class RobotiqDevice(abc.ABC):
         for t in self._tracks:
             if t.kind == "move" and not t.goal.done():
                 t.kind, t.seq, t.command = "stop", seq, self._last_cmd or Command()
-                t.deadline = time.monotonic() + self.settings.move_margin
+                t.deadline = self.clock.now() + self.settings.move_margin
 
     def auto_release(self, *, closing: bool = False) -> Goal:
         """Automatic (emergency) release: slow motion to the mechanical stop, opening
@@ -374,12 +403,13 @@ class RobotiqDevice(abc.ABC):
             if not st.gACT:
                 raise RobotiqNotReady(f"{self.where}: automatic release needs rACT = 1: "
                                       "call activate() first")
-            self._supersede(("move", "stop", "release"), "superseded by auto_release()")
+            self._supersede(("pending", "move", "stop", "release"),
+                            "superseded by auto_release()")
             cmd = Command(rACT=True, rATR=True, rARD=closing)
             seq = self._enqueue(cmd)
             self._held = self._dropped = False
             goal = Goal("robotiq.auto_release", on_cancel=self._on_cancel)
-            self._tracks.append(_Track(goal, "release", seq, cmd, time.monotonic()
+            self._tracks.append(_Track(goal, "release", seq, cmd, self.clock.now()
                                        + 2 * codec.STROKE / codec.SPEED_MIN
                                        + self.settings.move_margin))
             return goal
@@ -389,6 +419,11 @@ class RobotiqDevice(abc.ABC):
             track = next((t for t in self._tracks if t.goal is goal), None)
             if track is None:
                 goal.mark_cancelled("cancelled")
+                return
+            if track.kind == "pending":
+                # nothing was written for it: done at once
+                self._tracks.remove(track)
+                goal.mark_cancelled("cancelled before the move started")
                 return
             if track.kind == "activate":
                 # stop the activation with a reset; done once the gripper reports gSTA = 0
@@ -405,7 +440,7 @@ class RobotiqDevice(abc.ABC):
                 track.seq = self._enqueue(self._stop_command())
                 track.command = self._last_cmd or Command()
                 track.kind = "stop"
-            track.deadline = time.monotonic() + self.settings.move_margin
+            track.deadline = self.clock.now() + self.settings.move_margin
 
     def _state_locked(self) -> GripperState:
         st = self._status or Status()
@@ -492,7 +527,7 @@ class RobotiqDevice(abc.ABC):
 
     def _advance(self, st: Status) -> None:
         """Advance the goals with a fresh status (lock held)."""
-        now = time.monotonic()
+        now = self.clock.now()
         keep: list[_Track] = []
         for t in self._tracks:
             if t.goal.done():
@@ -508,6 +543,21 @@ class RobotiqDevice(abc.ABC):
                 elif now > t.deadline:
                     t.goal.fail(f"{self.where}: activation did not finish within "
                                 f"{self.settings.activation_timeout:g} s (gSTA={st.gSTA})")
+                else:
+                    keep.append(t)
+            elif t.kind == "pending":
+                after = t.after
+                if after is not None and after.done() and after.state is not GoalState.SUCCEEDED:
+                    why = after.reason.removeprefix(f"{self.where}: ")
+                    t.goal.fail(f"{self.where}: move not started: activation "
+                                f"{after.state.value}: {why}")
+                elif st.gFLT and st.gFLT != 0x05:
+                    t.goal.fail(f"{fault_error(st.gFLT, self.where)} (before moving)")
+                elif st.gSTA == 3 and st.gACT and (after is None or after.done()):
+                    keep.append(self._start_move(t.goal, t.command, st))
+                elif now > t.deadline:
+                    t.goal.fail(f"{self.where}: move not started: activation did not finish "
+                                f"within {self.settings.activation_timeout:g} s (gSTA={st.gSTA})")
                 else:
                     keep.append(t)
             elif t.kind == "move":

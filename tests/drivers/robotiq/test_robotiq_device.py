@@ -74,9 +74,11 @@ def test_move_before_activation_says_what_to_do(fake: FakeRobotiq) -> None:
         with pytest.raises(RobotiqNotReady, match=r"call activate\(\) first"):
             g.move(0.04)
         act = g.activate()
-        with pytest.raises(CapabilityError, match="activation in progress"):
-            g.move(0.04)
         assert finish(act) is GoalState.SUCCEEDED
+        fake.model.inject_fault(0x0E)
+        assert wait_for(lambda: "overcurrent" in g.state().fault, 1.0)
+        with pytest.raises(CapabilityError, match=r"overcurrent .*call activate\(\)"):
+            g.move(0.04)
     finally:
         g.disconnect()
     with pytest.raises(RobotiqNotReady, match=r"call open\(\) first"):

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Iterator
 
 import pytest
 from robotiq_helpers import wait_for
 
-from mmexec.drivers.fakes.robotiq import FakeRobotiq
+from mmexec.drivers.fakes.robotiq import FakeRobotiq, GripperModel
 from mmexec.drivers.robotiq import codec
 from mmexec.drivers.robotiq.codec import Command, Status
 from mmexec.drivers.transport import LinkTimeout, SerialSettings, SerialTransport
@@ -173,3 +174,65 @@ def test_activation_fault(bus) -> None:  # type: ignore[no-untyped-def]
     fake.model.activation_fault = False
     activate(link)
     assert status(link).gFLT == 0
+
+
+# --------------------------------------------------------------- the firmware model, stepped
+# explicit times (the model takes ``now``), so no wall time is involved
+
+
+def activated_model(**kw: object) -> GripperModel:
+    model = GripperModel(start=0.0, **kw)  # type: ignore[arg-type]
+    model.write(Command(), 0.0)
+    model.write(Command(rACT=True), 0.0)
+    model.touch(model.activation_time)            # the request that sees it activated
+    model.after_request()
+    assert model.status().gSTA == 3
+    return model
+
+
+def test_activation_takes_seconds_and_the_fingers_travel_fully() -> None:
+    model = GripperModel(start=10.0)              # vendor: seconds, fingers travel fully
+    assert model.activation_time == 2.0
+    model.write(Command(rACT=True), 10.0)
+    seen = []
+    for t in (10.5, 11.0, 11.5, 11.75):
+        model.step(t)
+        st = model.status()
+        seen.append((st.gSTA, st.gPO))
+    assert seen == [(1, 128), (1, 255), (1, 128), (1, 64)]   # closed, then back open
+    model.step(12.0)
+    assert (model.status().gSTA, model.status().gPO) == (3, 0)
+
+
+def test_activation_that_never_completes_can_be_released() -> None:
+    model = GripperModel(activation_time=math.inf, start=0.0)
+    model.write(Command(rACT=True), 0.0)
+    model.step(1e6)
+    assert model.status().gSTA == 1
+    model.activation_time = 2.0                   # already longer than that: done next step
+    model.step(1e6 + 0.01)
+    assert model.status().gSTA == 3
+
+
+def test_no_communication_after_a_second_of_silence() -> None:
+    model = activated_model()
+    t = model.activation_time
+    model.step(t + 0.99)
+    assert model.status().gFLT == 0               # the vendor's "at least 1 s"
+    model.step(t + 1.01)
+    assert model.status().gFLT == 0x09           # silence: raised without any request
+    model.touch(t + 1.02)                         # traffic resumes: this answer still says so
+    assert model.status().gFLT == 0x09
+    model.after_request()
+    assert model.status().gFLT == 0               # cleared by the traffic
+
+
+def test_no_communication_clears_after_the_configured_answers() -> None:
+    model = activated_model(comm_fault_answers=3)
+    t = model.activation_time + 1.5
+    seen = []
+    for k in range(4):
+        model.touch(t + 0.01 * k)
+        seen.append(model.status().gFLT)
+        model.after_request()
+    assert seen == [0x09, 0x09, 0x09, 0]
