@@ -57,8 +57,10 @@ __all__ = [
     "DEVICE_KINDS",
     "DeviceUnavailable",
     "RealRobot",
+    "SinceStartClock",
     "build",
     "check",
+    "check_navigation",
     "pose_matrix",
 ]
 
@@ -77,12 +79,25 @@ class DeviceUnavailable(InputError):
 # --------------------------------------------------------------------------- robot
 
 
+class SinceStartClock(MonotonicClock):
+    """The real robot's clock: monotonic wall-clock seconds since the clock was made (when
+    the robot was built), so clock times (the event log's ``t``, ``run_end``'s duration)
+    count from the start of the run as the sim's and the mock's do."""
+
+    def __init__(self) -> None:
+        self._origin = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._origin
+
+
 class RealRobot(Robot):
-    """The real robot: capabilities backed by drivers, a monotonic wall clock."""
+    """The real robot: capabilities backed by drivers, a monotonic wall clock counting
+    seconds since the robot was built (:class:`SinceStartClock`)."""
 
     def __init__(self, name: str, profile: Mapping[str, Any], clock: MonotonicClock | None = None) -> None:
         self.name = name
-        self.clock = clock or MonotonicClock()
+        self.clock = clock or SinceStartClock()
         self.profile = dict(profile)
         self._closers: list[tuple[str, Callable[[], None]]] = []
         self._next_tick: float | None = None
@@ -179,6 +194,8 @@ class _Ctx:
     devices: dict[str, Any] = field(default_factory=dict)   # slot -> driver device object
     #: checks without I/O that build() runs before opening any device (optional extras)
     prepare: list[Callable[[], None]] = field(default_factory=list)
+    #: the planned base's footprint radius [m] (its Base.radius once connected)
+    base_radius: float | None = None
 
 
 #: a planned device: (slot, label for errors, mark, connect function returning the capability)
@@ -249,6 +266,7 @@ def _kobuki(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
     start = bind(_Start, start_part, section.mark, path, ctx.problems)
     if cfg is None or start is None:
         return None
+    ctx.base_radius = start.footprint_radius if start.footprint_radius is not None else KobukiBase.radius
 
     def connect() -> KobukiBase:
         dev = KobukiDevice(cfg, ctx.robot.clock)
@@ -479,8 +497,8 @@ def build(
     Raises :class:`InputError` for a bad section (all problems at once, before any port
     is opened) and :class:`DeviceUnavailable` for a device that cannot be brought up.
     """
-    robot, plans, prepare = _plan(section, profile)
-    for step in prepare:
+    robot, plans, ctx = _plan(section, profile)
+    for step in ctx.prepare:
         step()
     try:
         for slot, label, _mark, connect in plans:
@@ -495,13 +513,19 @@ def build(
 def check(section: YDict | None, *, profile: Mapping[str, Any] | None = None) -> list[str]:
     """Validate a ``robot:`` section without opening any port: returns the devices it
     would bring up (``"base: kobuki on /dev/kobuki"``, ...) or raises InputError."""
-    _robot, plans, _prepare = _plan(section, profile or {})
+    _robot, plans, _ctx = _plan(section, profile or {})
     return [f"{slot}: {label}" for slot, label, _m, _c in plans]
 
 
-def _plan(
-    section: YDict | None, profile: Mapping[str, Any]
-) -> tuple[RealRobot, list[_Plan], list[Callable[[], None]]]:
+def check_navigation(section: YDict | None) -> tuple[OccupancyGrid | None, float | None]:
+    """What navigation will use, found without opening any port: the section's map
+    (``robot.map``, None without one) and the planned base's footprint radius [m] (its
+    ``Base.radius`` once connected; None without a base). InputError as :func:`check`."""
+    robot, _plans, ctx = _plan(section, {})
+    return robot.occupancy, ctx.base_radius
+
+
+def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot, list[_Plan], _Ctx]:
     if section is None or not isinstance(section, YDict):
         mark = getattr(section, "mark", Mark("<config>", 1, 1))
         raise InputError.at(mark, "robot: missing section (expected a mapping with base / arm / gripper / camera)")
@@ -543,7 +567,7 @@ def _plan(
     robot.occupancy = _load_map(section, problems)
     robot.scene = _load_scene(section, problems)
     problems.raise_if_any()
-    return robot, plans, ctx.prepare
+    return robot, plans, ctx
 
 
 def _load_map(section: YDict, problems: Problems) -> OccupancyGrid | None:

@@ -4,9 +4,12 @@ Exit codes:
 
 * 0: success (``run``: every request succeeded);
 * 1: ``run``: at least one request failed, timed out or raised; also a backend that
-  would not start (a serial port that does not open) and internal errors;
-* 2: bad input (missing file, bad YAML, bad config or mission, a mission needing a
-  capability the configured robot lacks, bad ``--request``, unknown skill module, bad
+  failed to start for a reason outside the config (``mmexec: backend 'sim' failed to
+  start: ...``, e.g. no display for ``--gui``) and internal errors;
+* 2: bad input (missing file, bad YAML, bad config, profile or mission, a mission needing
+  a capability the configured robot lacks, ``--gui`` / ``--record`` on a backend that
+  cannot honour them, a configured device that cannot be brought up: no such port, no
+  answer, located at its config section; bad ``--request``, unknown skill module, bad
   command line), with one line per problem on stderr and no traceback;
 * 130: interrupted (Ctrl-C): the tree was halted, the robot left safe, the log flushed;
 * 141: the reader of standard output went away (``mmexec show ... | head``): the
@@ -189,12 +192,12 @@ def _preload_pybullet_quietly() -> None:
         return  # the backend factory reports the missing module properly
 
 
-def _load_for_mission(config: Path | None) -> Any:
+def _load_for_mission(config: Path | None, *, check_profile: bool = True) -> Any:
     from mmexec.executive.config import load_config, load_skill_modules
 
     loaded = load_config(config) if config is not None else None
     _preload_pybullet_quietly()  # the built-in arm skills import pybullet: no banner
-    load_skill_modules(loaded)
+    load_skill_modules(loaded, check=check_profile)
     return loaded
 
 
@@ -271,14 +274,22 @@ def binding_capabilities(loaded: Any) -> frozenset[str]:
 
 
 def _check_binding(mission: Any, loaded: Any) -> None:
-    """InputError for each skill leaf needing a capability the configured robot lacks.
-    Nothing is opened: see :func:`binding_capabilities`."""
+    """InputError with every problem of binding ``mission`` to the config, all at once:
+    a bad backend section, each skill leaf needing a capability the configured robot
+    lacks, and the profile and its base poses on the robot's map
+    (:func:`mmexec.executive.binding.binding_problems`). Nothing is opened: see
+    :func:`binding_capabilities`."""
+    from mmexec.executive.binding import binding_problems
     from mmexec.skills.base import SkillSpec
 
     _preload_pybullet_quietly()
-    caps = binding_capabilities(loaded)
     problems: list[Problem] = []
-    for spec in _walk_specs(mission.root_file.tree):
+    try:
+        caps: frozenset[str] | None = binding_capabilities(loaded)
+    except InputError as e:
+        problems.extend(e.problems)
+        caps = None
+    for spec in _walk_specs(mission.root_file.tree) if caps is not None else ():
         skill = (getattr(spec, "opts", {}) or {}).get("skill")
         if not isinstance(skill, SkillSpec):
             continue
@@ -286,8 +297,9 @@ def _check_binding(mission: Any, loaded: Any) -> None:
             if need not in caps:
                 problems.append(Problem(spec.mark, f"skill {skill.name!r} needs a {need}, and backend "
                                                    f"{loaded.backend!r} in {loaded.path} has none"))
+    problems.extend(binding_problems(loaded))
     if problems:
-        raise InputError(problems)
+        raise InputError(dict.fromkeys(problems))  # a bad section is found by both checks: once
 
 
 # --------------------------------------------------------------------------- commands
@@ -296,7 +308,7 @@ def _check_binding(mission: Any, loaded: Any) -> None:
 def _cmd_validate(args: argparse.Namespace) -> int:
     from mmexec.executive.compiler import load_mission
 
-    loaded = _load_for_mission(args.config)
+    loaded = _load_for_mission(args.config, check_profile=False)  # the binding check reports it with the rest
     mission = load_mission(args.mission)
     if loaded is not None:
         _check_binding(mission, loaded)

@@ -7,9 +7,9 @@ A run config is YAML loaded through :mod:`mmexec.config.yamlload` and bound into
     rate_hz: 20              # tick rate [Hz of clock time]
     mock: {...}              # options for the backend named by `backend` (one section
     sim: {...}               #   per backend name; only the selected one is read)
-    profile:                 # robot profile read by skills (free-form mapping):
-      named_poses: {home: [0, 0, 0, 0, 0, 0]}   #   arm poses [rad]
-      home: [0.0, 0.0, 0.0]                      #   base home in map [m, m, rad]
+    profile:                 # robot profile read by skills: each section is declared by
+      named_poses: {home: [0, 0, 0, 0, 0, 0]}   #   the skill package that reads it
+      home: [0.0, 0.0, 0.0]                      #   (mmexec.skills.profile), checked at load
     skills:
       modules: [my_lab.skills]   # user skill modules to import (the ONLY way user code loads)
 
@@ -40,8 +40,11 @@ __all__ = [
     "SkillsConfig",
     "backend_builder",
     "build_robot",
+    "check_options",
+    "check_profile",
     "load_config",
     "load_skill_modules",
+    "profile_problems",
     "robot_capabilities",
 ]
 
@@ -54,6 +57,19 @@ BACKENDS: dict[str, str] = {
     "mock": "mmexec.drivers.mock.backend:build",
     "sim": "mmexec.sim.backend:build",
     "robot": "mmexec.drivers.robot:build",
+}
+
+#: Run options (``mmexec run --gui / --record``) each backend honours; asking a backend
+#: for one it cannot honour is an input error, not silently ignored.
+BACKEND_OPTIONS: dict[str, frozenset[str]] = {
+    "mock": frozenset(),
+    "sim": frozenset({"gui", "record"}),
+    "robot": frozenset(),
+}
+#: option -> (its command-line flag, what it does)
+_OPTION_FLAGS: dict[str, tuple[str, str]] = {
+    "gui": ("--gui", "the simulator window"),
+    "record": ("--record", "a video of the simulation"),
 }
 
 #: Capability attribute names of :class:`~mmexec.drivers.interfaces.Robot`.
@@ -131,8 +147,11 @@ def load_config(path: str | Path) -> LoadedConfig:
     return LoadedConfig(p, digest, cfg, raw)
 
 
-def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = REGISTRY) -> None:
-    """Import the built-in skill modules, then the config's ``skills.modules``.
+def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = REGISTRY, *,
+                       check: bool = True) -> None:
+    """Import the built-in skill modules, then the config's ``skills.modules``; then,
+    with ``check``, check the config's robot profile against the sections those modules
+    declare (:func:`check_profile`).
 
     A module that fails to import (missing, syntax error, exception at import) is an
     InputError naming the module and its line in the config; all are reported together.
@@ -158,6 +177,27 @@ def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = RE
                 where = f" ({e.filename}:{e.lineno})"
             problems.add(mark, f"skills.modules[{i}]: cannot import {module!r}: {type(e).__name__}: {e}{where}")
     problems.raise_if_any()
+    if check:
+        check_profile(loaded)
+
+
+def profile_problems(loaded: LoadedConfig) -> list[Problem]:
+    """Every problem of the config's ``profile:`` against the sections the loaded skill
+    packages declare (:data:`mmexec.skills.profile.PROFILE`): unknown sections and keys
+    with a hint, wrong types, values out of range. Import the skill modules first."""
+    from mmexec.skills.profile import PROFILE
+
+    raw = loaded.raw.get("profile")
+    if not isinstance(raw, YDict):
+        return []  # absent, or not a mapping (the RunConfig binding reports that)
+    return list(PROFILE.check(raw, loaded.mark("profile"))[1])
+
+
+def check_profile(loaded: LoadedConfig) -> None:
+    """Raise InputError with every :func:`profile_problems` of the config."""
+    problems = profile_problems(loaded)
+    if problems:
+        raise InputError(problems)
 
 
 def backend_builder(name: str, mark: Mark) -> Callable[..., Robot]:
@@ -191,6 +231,7 @@ def build_robot(
     builder = backend_builder(loaded.backend, loaded.mark("backend"))
     opts = {"gui": False, "record": None}
     opts.update(options or {})
+    check_options(loaded, opts)
     try:
         robot = builder(loaded.section(), profile=dict(loaded.config.profile), seed=seed, options=opts)
     except InputError as e:
@@ -202,6 +243,19 @@ def build_robot(
     if not isinstance(robot, Robot):
         raise TypeError(f"backend {loaded.backend!r} builder returned {type(robot).__name__}, not a Robot")
     return robot
+
+
+def check_options(loaded: LoadedConfig, options: Mapping[str, Any]) -> None:
+    """InputError at the config's ``backend:`` for each run option set in ``options``
+    (``gui`` true, ``record`` a path) that the backend does not honour (:data:`BACKEND_OPTIONS`)."""
+    honoured = BACKEND_OPTIONS.get(loaded.backend, frozenset())
+    problems = Problems()
+    for name, (flag, what) in _OPTION_FLAGS.items():
+        if options.get(name) and name not in honoured:
+            able = [b for b, opts in BACKEND_OPTIONS.items() if name in opts]
+            problems.add(loaded.mark("backend"), f"backend: {loaded.backend!r} cannot honour {flag} ({what}; only "
+                         f"backend {', '.join(map(repr, able))} can): run without it or use a sim config")
+    problems.raise_if_any()
 
 
 def robot_capabilities(robot: Robot) -> frozenset[str]:

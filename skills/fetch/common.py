@@ -1,9 +1,11 @@
 """Shared pieces of the fetch skills: the robot profile's ``fetch:`` section, the world
 model keys, status events and small pose helpers.
 
-The profile section is bound through :mod:`mmexec.config.yamlload`, so a mistake in a
-config file fails the first skill that reads it with ``FILE:LINE:COL: profile.fetch.key:
-message`` (a PRECONDITION failure), never a traceback.
+The fetch package declares its profile section, ``fetch:`` (:class:`FetchProfile`: each
+setting with its unit, range and meaning), in :mod:`mmexec.skills.profile`, so a config's
+mistakes there are reported when the config loads, as ``FILE:LINE:COL:
+profile.fetch.key: message``; a profile set up in code that is wrong fails the first skill
+that reads it (PRECONDITION), never with a traceback.
 
 World model (``ctx.world``, shared by every skill of a run, across requests):
 
@@ -23,14 +25,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Generator, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 
-from mmexec.config.yamlload import InputError, Mark, Problems, bind, mark_of
+from mmexec.config.yamlload import InputError, Mark, Problems, mark_of
 from mmexec.drivers.interfaces import Base, Pose2D
 from mmexec.skills.base import FailureKind, SkillCancelled, SkillContext, SkillFailure
+from mmexec.skills.profile import PROFILE, declare_section, setting
 
 __all__ = [
     "WORLD_ARM",
@@ -49,6 +52,7 @@ __all__ = [
     "brake",
     "fetch_profile",
     "named_base_pose",
+    "nav_margin",
     "pose_list",
 ]
 
@@ -68,148 +72,119 @@ STOPPED_W = 1e-3
 
 @dataclass(frozen=True)
 class NavSettings:
-    """Base motion: speed limits [m/s, rad/s], accelerations [m/s^2, rad/s^2], extra
-    inflation ``margin`` [m] on top of the base radius, goal tolerances [m, rad], pure
-    pursuit ``lookahead`` [m], the default navigation ``timeout`` [clock s] and
-    ``goal_search`` [m]: a goal that an obstacle covers (in the inflated map) is moved to
-    the nearest free point within this distance, like a global planner's goal tolerance
-    (0: fail instead)."""
+    """Base motion: speed limits and accelerations, extra inflation of the map, goal
+    tolerances, pure pursuit lookahead, the default navigation timeout and the goal
+    search radius (see each setting's doc)."""
 
-    max_v: float = 0.5
-    max_w: float = 1.5
-    accel_v: float = 0.8
-    accel_w: float = 3.0
-    margin: float = 0.03
-    goal_tolerance: float = 0.04
-    heading_tolerance: float = 0.04
-    lookahead: float = 0.35
-    timeout: float = 90.0
-    goal_search: float = 0.3
-
-    def validate(self) -> list[str]:
-        bad = [n for n in ("max_v", "max_w", "accel_v", "accel_w", "goal_tolerance", "heading_tolerance",
-                           "lookahead", "timeout") if not getattr(self, n) > 0]
-        out = [f"{n}: must be > 0" for n in bad]
-        if self.margin < 0:
-            out.append("margin: must be >= 0 m")
-        if self.goal_search < 0:
-            out.append("goal_search: must be >= 0 m")
-        return out
+    max_v: float = setting(0.5, unit="m/s", gt=0, doc="linear speed limit")
+    max_w: float = setting(1.5, unit="rad/s", gt=0, doc="angular speed limit")
+    accel_v: float = setting(0.8, unit="m/s^2", gt=0, doc="linear acceleration limit")
+    accel_w: float = setting(3.0, unit="rad/s^2", gt=0, doc="angular acceleration limit")
+    margin: float = setting(0.03, unit="m", ge=0, doc="inflation of the map on top of the base's footprint radius")
+    goal_tolerance: float = setting(0.04, unit="m", gt=0, doc="position tolerance at the goal")
+    heading_tolerance: float = setting(0.04, unit="rad", gt=0, doc="heading tolerance at the goal")
+    lookahead: float = setting(0.35, unit="m", gt=0, doc="pure pursuit lookahead")
+    timeout: float = setting(90.0, unit="clock s", gt=0, doc="default navigation timeout")
+    goal_search: float = setting(0.3, unit="m", ge=0, doc=(
+        "a goal that an obstacle covers (in the inflated map) is moved to the nearest free point within "
+        "this distance, like a global planner's goal tolerance (0: fail instead)"))
 
 
 @dataclass(frozen=True)
 class ArmSettings:
-    """Arm planning: the robot ``model`` (sim model name, whose URDF is the planning
-    model: ``locobot_wx250s`` or ``ur5e_robotiq``), ``tcp_offset`` [m] of the UR tool,
-    OMPL ``algorithm``, ``time_limit`` [s] per attempt, ``attempts``, ``velocity_scale``
-    and ``acceleration_scale`` (fractions of the joint limits), and the named poses
-    (keys of the profile's ``named_poses``) used to ``stow`` the arm while driving,
-    ``carry`` an item, ``look`` with an arm-mounted camera (None: camera not on the arm),
-    and ``reach``: the posture that seeds IK for pick and place poses (its yaw joint
-    turned towards the target; None: the current posture only). Planning runs on a
-    worker thread; on a wall clock each tick waits at most ``plan_slice`` [wall s] for it
-    (keep it well below the tick period), then yields; on a stepped clock (sim, mock) the
-    tick waits for the plan, which costs exactly one tick of clock time."""
+    """Arm planning: the planning model, the OMPL planner's settings, speed scaling, and
+    the named poses (keys of the profile's ``named_poses``) the skills use in each role.
+    Planning runs on a worker thread; on a wall clock each tick waits at most
+    ``plan_slice`` [wall s] for it (keep it well below the tick period), then yields; on
+    a stepped clock (sim, mock) the tick waits for the plan, which costs exactly one tick
+    of clock time."""
 
-    model: Literal["locobot_wx250s", "ur5e_robotiq"] = "locobot_wx250s"
-    tcp_offset: float = 0.155
-    algorithm: Literal["rrtconnect", "rrtstar"] = "rrtconnect"
-    time_limit: float = 1.0
-    attempts: int = 3
-    velocity_scale: float = 0.8
-    acceleration_scale: float = 0.8
-    stow: str = "sleep"
-    carry: str = "sleep"
-    look: str | None = None
-    reach: str | None = None
-    plan_slice: float = 0.015
-
-    def validate(self) -> list[str]:
-        out = []
-        if not self.time_limit > 0 or self.attempts < 1:
-            out.append("time_limit must be > 0 s and attempts >= 1")
-        if not (0 < self.velocity_scale <= 1 and 0 < self.acceleration_scale <= 1):
-            out.append("velocity_scale and acceleration_scale must be in (0, 1]")
-        if not 0 <= self.plan_slice <= 0.1:
-            out.append(f"plan_slice: expected 0..0.1 s of a tick, got {self.plan_slice}")
-        return out
+    model: Literal["locobot_wx250s", "ur5e_robotiq"] = setting(
+        "locobot_wx250s", doc="sim model name whose URDF is the planning model")
+    tcp_offset: float = setting(0.155, unit="m", ge=0, doc="UR tool: flange to the closed-grasp point")
+    algorithm: Literal["rrtconnect", "rrtstar"] = setting("rrtconnect", doc="OMPL planner")
+    time_limit: float = setting(1.0, unit="s", gt=0, doc="planning time per attempt")
+    attempts: int = setting(3, ge=1, doc="planning attempts")
+    velocity_scale: float = setting(0.8, gt=0, le=1, doc="fraction of the joint velocity limits")
+    acceleration_scale: float = setting(0.8, gt=0, le=1, doc="fraction of the joint acceleration limits")
+    stow: str = setting("sleep", doc="named pose to stow the arm in while driving")
+    carry: str = setting("sleep", doc="named pose to carry an item in")
+    look: str | None = setting(None, doc="named pose to look with an arm-mounted camera (None: camera not on the arm)")
+    reach: str | None = setting(None, doc=(
+        "posture that seeds IK for pick and place poses, its yaw joint turned towards the target "
+        "(None: the current posture only)"))
+    plan_slice: float = setting(0.015, unit="wall s", ge=0, le=0.1, doc="longest a tick waits for the planner on a wall clock")
 
 
 @dataclass(frozen=True)
 class DepotSettings:
-    """The depot: ``base`` pose [x, y, theta] in map where the base stops to place, and
-    ``place`` [x, y, z] in map [m] where the held item's centre is released."""
+    """The depot: where the base stops to place, and where the held item is released."""
 
-    base: tuple[float, float, float]
-    place: tuple[float, float, float]
+    base: tuple[float, float, float] = setting(unit="m, m, rad", base_pose=True,
+                                               doc="base pose [x, y, theta] in map where the base stops to place")
+    place: tuple[float, float, float] = setting(unit="m", doc="point [x, y, z] in map where the held item's centre is released")
 
 
 @dataclass(frozen=True)
 class FetchProfile:
-    """The ``fetch:`` section of a robot profile (see docs/fetch.md).
+    """The ``fetch:`` section of a robot profile (see docs/fetch.md and each setting's
+    doc). Lengths in m, angles in rad unless the name says ``deg``; marker-frame offsets
+    have x right, y up, z out of the marker face."""
 
-    Lengths in m, angles in rad unless the name says ``deg``. ``item_size`` is the box
-    [x, y, z] added to the planning scene; ``marker_length`` the black square's side;
-    ``approach_distances`` stand-off distances from the marker face tried in order (the
-    base-recovery indexes them); ``search_locations`` [x, y, theta] poses in map visited
-    in order; ``grasp_depth`` how far behind the marker face the grasp point lies;
-    ``grasp_height`` how far above the marker centre (along the marker's y, up) the pick
-    and place poses lie: a gripper body thicker than the box is tall grasps the box's
-    upper part so the body clears the board the box stands on;
-    ``pre_grasp``, ``retract`` and ``place_retract`` offsets in the marker / place frame;
-    ``refine_at`` the base's stand-off from the marker face [m] where ``approach`` looks
-    again when the estimate was seen from afar (a wrist camera ahead of the base needs it
-    farther than a head camera does); ``redetect_at_standoff``: ``approach`` looks at the
-    marker once more from the stand-off pose it reached and keeps that estimate for the
-    pick (a wrist camera in its look pose is then closest to the marker); ``grasp_force`` [N]; ``back_off`` [m] the base backs away after a pick; ``min_held_width`` [m]: a closed gripper narrower than this
-    holds nothing."""
-
-    depot: DepotSettings
-    search_locations: list[tuple[float, float, float]] = field(default_factory=list)
-    approach_distances: list[float] = field(default_factory=lambda: [0.35, 0.45, 0.55])
-    item_size: tuple[float, float, float] = (0.06, 0.06, 0.06)
-    marker_length: float = 0.045
-    marker_dictionary: str = "DICT_4X4_50"
-    search_step_deg: float = 30.0
-    settle_time: float = 0.2
-    detect_frames: int = 3
-    grasp_depth: float = 0.03
-    grasp_height: float = 0.0
-    refine_at: float = 0.8
-    redetect_at_standoff: bool = False
-    pre_grasp: tuple[float, float, float] = (0.0, 0.0, 0.10)
-    retract: tuple[float, float, float] = (0.0, 0.10, 0.10)
-    place_retract: tuple[float, float, float] = (0.0, 0.0, 0.10)
-    grasp_force: float = 20.0
-    back_off: float = 0.25
-    min_held_width: float = 0.01
-    nav: NavSettings = field(default_factory=NavSettings)
-    arm: ArmSettings = field(default_factory=ArmSettings)
+    depot: DepotSettings = setting(doc="where the base stops to place and where the item is released")
+    search_locations: list[tuple[float, float, float]] = setting(
+        [], unit="m, m, rad", base_pose=True, doc="base poses [x, y, theta] in map visited in order by search")
+    approach_distances: list[float] = setting(
+        [0.35, 0.45, 0.55], unit="m", gt=0,
+        doc="stand-off distances from the marker face, tried in order (the base recovery indexes them)")
+    item_size: tuple[float, float, float] = setting((0.06, 0.06, 0.06), unit="m", gt=0,
+                                                    doc="box [x, y, z] added to the planning scene")
+    marker_length: float = setting(0.045, unit="m", gt=0, doc="side of the marker's black square")
+    marker_dictionary: str = setting("DICT_4X4_50", doc="ArUco dictionary")
+    search_step_deg: float = setting(30.0, unit="deg", ge=1, le=180, doc="turn between two views of a search")
+    settle_time: float = setting(0.2, unit="s", ge=0, doc="wait after a turn before looking")
+    detect_frames: int = setting(3, ge=1, doc="frames averaged per detection")
+    grasp_depth: float = setting(0.03, unit="m", ge=0, doc="how far behind the marker face the grasp point lies")
+    grasp_height: float = setting(0.0, unit="m", doc=(
+        "how far above the marker centre (along the marker's y, up) the pick and place poses lie: a gripper "
+        "body thicker than the box is tall grasps the box's upper part so the body clears the board under it"))
+    refine_at: float = setting(0.8, unit="m", gt=0, doc=(
+        "the base's stand-off from the marker face where approach looks again when the estimate was seen "
+        "from afar (a wrist camera ahead of the base needs it farther than a head camera does)"))
+    redetect_at_standoff: bool = setting(False, doc=(
+        "approach looks at the marker once more from the stand-off pose it reached and keeps that estimate "
+        "for the pick"))
+    pre_grasp: tuple[float, float, float] = setting((0.0, 0.0, 0.10), unit="m", doc="pre-grasp offset, marker frame")
+    retract: tuple[float, float, float] = setting((0.0, 0.10, 0.10), unit="m", doc="retreat after a grasp, marker frame")
+    place_retract: tuple[float, float, float] = setting((0.0, 0.0, 0.10), unit="m",
+                                                        doc="retreat after a release, place frame")
+    grasp_force: float = setting(20.0, unit="N", gt=0, doc="gripper force")
+    back_off: float = setting(0.25, unit="m", ge=0, doc="how far the base backs away after a pick")
+    min_held_width: float = setting(0.01, unit="m", ge=0, doc="a closed gripper narrower than this holds nothing")
+    nav: NavSettings = setting(NavSettings(), doc="base motion")
+    arm: ArmSettings = setting(ArmSettings(), doc="arm planning")
 
     def validate(self) -> list[str]:
+        """Checks that relate several settings (single-value ranges are declared)."""
         out = []
-        if not self.approach_distances or any(d <= 0 for d in self.approach_distances):
+        if not self.approach_distances:
             out.append("approach_distances: expected a non-empty list of distances > 0 m")
-        if min(self.item_size) <= 0 or self.marker_length <= 0:
-            out.append("item_size and marker_length must be > 0 m")
-        if not 1.0 <= self.search_step_deg <= 180.0:
-            out.append(f"search_step_deg: expected 1..180, got {self.search_step_deg}")
-        if self.refine_at <= 0:
-            out.append(f"refine_at: expected > 0 m, got {self.refine_at:g}")
-        if self.detect_frames < 1:
-            out.append("detect_frames: expected >= 1")
         if not abs(self.grasp_height) < self.item_size[2] / 2:
             out.append(f"grasp_height: expected less than half the item's height ({self.item_size[2] / 2:g} m) "
                        f"from its centre, got {self.grasp_height:g} m")
         return out
 
 
+declare_section("fetch", FetchProfile, package="mmexec.skills.fetch",
+                doc="the fetch mission's settings (docs/fetch.md)")
+
 _PROFILE_CACHE: dict[int, tuple[Any, FetchProfile]] = {}
 
 
 def fetch_profile(ctx: SkillContext) -> FetchProfile:
     """The bound ``profile.fetch`` section; SkillFailure(PRECONDITION) naming the file
-    position when it is missing or wrong."""
+    position when it is missing or wrong (a config checked at load cannot be wrong here;
+    a profile set up in code, as in tests, can)."""
     raw = ctx.profile.get("fetch") if isinstance(ctx.profile, Mapping) else None
     if raw is None:
         raise SkillFailure(FailureKind.PRECONDITION,
@@ -218,8 +193,7 @@ def fetch_profile(ctx: SkillContext) -> FetchProfile:
     if cached is not None and cached[0] is raw:
         return cached[1]
     problems = Problems()
-    mark = mark_of(raw, Mark("<profile>", 1, 1))
-    out = bind(FetchProfile, raw, mark, "profile.fetch", problems)
+    out = PROFILE.bind_section("fetch", raw, mark_of(raw, Mark("<profile>", 1, 1)), problems)
     if problems:
         raise SkillFailure(FailureKind.PRECONDITION, str(problems[0]))
     assert isinstance(out, FetchProfile)
@@ -229,12 +203,24 @@ def fetch_profile(ctx: SkillContext) -> FetchProfile:
 
 def check_profile(profile: Mapping[str, Any]) -> None:
     """Raise InputError with every problem of ``profile['fetch']`` (for config checks)."""
-    problems = Problems()
     raw = profile.get("fetch")
     if raw is None:
-        raise InputError.at(Mark("<profile>", 1, 1), "profile: missing 'fetch:' section")
-    bind(FetchProfile, raw, mark_of(raw, Mark("<profile>", 1, 1)), "profile.fetch", problems)
+        raise InputError.at(mark_of(profile, Mark("<profile>", 1, 1)), "profile: missing 'fetch:' section")
+    problems = Problems()
+    PROFILE.bind_section("fetch", raw, mark_of(raw, Mark("<profile>", 1, 1)), problems)
     problems.raise_if_any()
+
+
+def nav_margin(profile: Mapping[str, Any]) -> float:
+    """The margin [m] navigation adds to the base's footprint radius when it inflates the
+    map: ``fetch.nav.margin``, or its default when the profile has no (valid) fetch
+    section."""
+    raw = profile.get("fetch")
+    if raw is not None:
+        out = PROFILE.bind_section("fetch", raw, mark_of(raw, Mark("<profile>", 1, 1)), Problems())
+        if isinstance(out, FetchProfile):
+            return out.nav.margin
+    return NavSettings().margin
 
 
 def pose_list(value: Any, what: str) -> Pose2D:
