@@ -791,7 +791,21 @@ def _run_local(specs: Sequence[TrialSpec], workers: int, _address: str | None) -
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _import_ray() -> Any:
+#: Ray reads this when it is imported: "0" selects its single-machine mode (its default on
+#: macOS and Windows), where the node's address is 127.0.0.1 and every server of a local
+#: instance (GCS, raylet, workers, agents) listens on loopback only. On Linux Ray
+#: otherwise takes the machine's routable address and listens on all interfaces.
+RAY_SINGLE_MACHINE_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+#: The only address a local Ray instance started for a campaign may listen on.
+LOOPBACK = "127.0.0.1"
+
+
+def _import_ray(*, local: bool) -> Any:
+    """Import Ray. ``local`` (``--ray`` without an address): select Ray's single-machine
+    mode first (:data:`RAY_SINGLE_MACHINE_ENV`), so the instance started for the campaign
+    listens on 127.0.0.1 only; a cluster address is left to Ray."""
+    if local:
+        os.environ[RAY_SINGLE_MACHINE_ENV] = "0"
     try:
         import ray
     except ImportError:
@@ -800,21 +814,38 @@ def _import_ray() -> Any:
     return ray
 
 
-def _run_ray(specs: Sequence[TrialSpec], workers: int, address: str | None) -> Iterable[TrialResult]:
-    """Trials as Ray tasks (one CPU each) on the cluster at ``address`` or, for ``""``,
-    on a local Ray instance started for this campaign (``workers`` CPUs)."""
-    ray = _import_ray()
+def _ray_init(ray: Any, workers: int, address: str | None) -> bool:
+    """Connect to the cluster at ``address`` or, for ``""``, start a local instance with
+    ``workers`` CPUs that listens on 127.0.0.1 only, unless Ray is initialised already
+    (then the caller's instance is used). Returns True when this call initialised Ray
+    (the caller shuts it down). A local instance on another address (Ray imported in this
+    process before :func:`_import_ray` could select loopback) is shut down again and is
+    an InputError naming ``--ray``."""
+    if ray.is_initialized():
+        return False
     env = {k: os.environ[k] for k in ("PYTHONPATH", "MMEXEC_DEBUG") if k in os.environ}
     kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
     if env:
         kwargs["runtime_env"] = {"env_vars": env}
-    started = False
-    if not ray.is_initialized():
-        if address:
-            ray.init(address=address, **kwargs)
-        else:
-            ray.init(num_cpus=max(1, workers), **kwargs)
-        started = True
+    if address:
+        ray.init(address=address, **kwargs)
+        return True
+    ray.init(num_cpus=max(1, workers), **kwargs)
+    node = ray.util.get_node_ip_address()
+    if node != LOOPBACK:
+        ray.shutdown()
+        raise InputError.at(ArgMark("--ray", 0, 0), f"a local Ray instance would listen on {node}, not {LOOPBACK} "
+                            f"(Ray was imported before {RAY_SINGLE_MACHINE_ENV}=0 could be set); set it in the "
+                            "environment, or start a cluster yourself and pass its address")
+    return True
+
+
+def _run_ray(specs: Sequence[TrialSpec], workers: int, address: str | None) -> Iterable[TrialResult]:
+    """Trials as Ray tasks (one CPU each) on the cluster at ``address`` or, for ``""``,
+    on a local Ray instance started for this campaign (``workers`` CPUs, listening on
+    127.0.0.1 only: :func:`_ray_init`)."""
+    ray = _import_ray(local=not address)
+    started = _ray_init(ray, workers, address)
     try:
         task = ray.remote(num_cpus=1, max_retries=0)(run_trial)
         refs = {task.remote(s): s for s in specs}
@@ -1001,7 +1032,7 @@ def cmd_campaign(args: argparse.Namespace, *, out: TextIO | None = None,
         compare=list(args.compare), progress=progress,
     )
     if opts.ray is not None:
-        _import_ray()
+        _import_ray(local=not opts.ray)
     _, results = run_campaign(opts, out=out)
     return 0 if results and all(r.outcome == "success" for r in results) else 1
 
