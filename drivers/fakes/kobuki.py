@@ -132,6 +132,12 @@ class FakeKobukiState:
         return out
 
 
+def _every(n: int) -> int:
+    if n < 1:
+        raise ValueError(f"every must be >= 1 (one frame in every n), got {n}")
+    return n
+
+
 class KobukiFake(PtyDevice):
     """Kobuki protocol fake on a pty (see module doc). Thread-safe setters."""
 
@@ -150,8 +156,9 @@ class KobukiFake(PtyDevice):
         self._pending_extra = 0
         self._pending_gain = False
         self._corrupt = 0
-        self._corrupt_all = False
+        self._corrupt_every = 0     # corrupt one frame in this many (0: off)
         self._drop = 0
+        self._drop_every = 0        # drop one frame in this many (0: off)
         self._truncate = 0
         self._stray = b""
         self._unknown = 0
@@ -240,16 +247,23 @@ class KobukiFake(PtyDevice):
         with self._mutex:
             self._corrupt += n
 
-    def corrupt_stream(self, on: bool = True) -> None:
-        """Send every frame with a wrong checksum from now on (noise, wrong baud rate,
-        a failing cable) until ``corrupt_stream(False)``. The robot still hears commands."""
+    def corrupt_stream(self, on: bool = True, *, every: int = 1) -> None:
+        """From now on send one frame in every ``every`` (1: all of them) with a wrong
+        checksum (noise, wrong baud rate, a failing cable), until ``corrupt_stream(False)``.
+        The robot still hears commands."""
         with self._mutex:
-            self._corrupt_all = on
+            self._corrupt_every = _every(every) if on else 0
 
     def drop_next(self, n: int = 1) -> None:
         """Stamp the next ``n`` frames but do not send them (lost on the wire)."""
         with self._mutex:
             self._drop += n
+
+    def drop_stream(self, on: bool = True, *, every: int = 1) -> None:
+        """From now on stamp but do not send one frame in every ``every``, until
+        ``drop_stream(False)`` (``every=1`` is :attr:`mute`)."""
+        with self._mutex:
+            self._drop_every = _every(every) if on else 0
 
     def truncate_next(self, n: int = 1) -> None:
         """Send only the first half of the next ``n`` frames."""
@@ -324,10 +338,13 @@ class KobukiFake(PtyDevice):
 
     def on_tick(self, now: float) -> None:
         with self._mutex:
+            n = self.state.frames_stepped
             frame = self._step(0.02)
-            if self.mute or self._drop:
-                if not self.mute:
-                    self._drop -= 1
+            dropping = self.mute or bool(self._drop_every and n % self._drop_every == 0)
+            if not dropping and self._drop:
+                self._drop -= 1
+                dropping = True
+            if dropping:
                 self.state.frames_dropped += 1
                 return
             stray, self._stray = self._stray, b""
@@ -335,7 +352,7 @@ class KobukiFake(PtyDevice):
                 self._truncate -= 1
                 frame = frame[: len(frame) // 2]
                 self.state.frames_corrupted += 1
-            elif self._corrupt or self._corrupt_all:
+            elif self._corrupt or (self._corrupt_every and n % self._corrupt_every == 0):
                 self._corrupt = max(0, self._corrupt - 1)
                 frame = frame[:-1] + bytes((frame[-1] ^ 0x5A,))
                 self.state.frames_corrupted += 1

@@ -56,7 +56,7 @@ def test_ping_kobuki_silent(fake: KobukiFake, capsys: pytest.CaptureFixture[str]
 
 
 def test_ping_kobuki_no_such_port(capsys: pytest.CaptureFixture[str]) -> None:
-    assert hwcli.main(["ping", "kobuki", "--port", "/dev/no-kobuki-here"]) == 1
+    assert hwcli.main(["ping", "kobuki", "--port", "/dev/no-kobuki-here"]) == 2  # cannot open
     line = _one_line(capsys.readouterr().err)
     assert line.startswith("kobuki on /dev/no-kobuki-here: no such port")
 
