@@ -1,0 +1,26 @@
+"""Localisation against a map: AMCL (Probabilistic Robotics ch. 8, as ROS ``amcl``) and its
+laser-reflector enhancement (``reflector-amcl-tracking-grasp`` section 3.1).
+
+* :mod:`.motion`: the differential-drive odometry motion model;
+* :mod:`.likelihood`: the likelihood-field range-finder model;
+* :mod:`.reflectors`: reflector extraction, triangle matching, trilateration, weights;
+* :mod:`.amcl`: the particle filter that combines them.
+
+Pure numpy (+ OpenCV's distance transform); no capability I/O here.
+"""
+
+from mmexec.skills.localization.amcl import AmclConfig, Estimate, ParticleFilter
+from mmexec.skills.localization.likelihood import BeamModel, LikelihoodField
+from mmexec.skills.localization.motion import OdometryNoise
+from mmexec.skills.localization.reflectors import ReflectorConfig, TriangleLibrary
+
+__all__ = [
+    "AmclConfig",
+    "BeamModel",
+    "Estimate",
+    "LikelihoodField",
+    "OdometryNoise",
+    "ParticleFilter",
+    "ReflectorConfig",
+    "TriangleLibrary",
+]
