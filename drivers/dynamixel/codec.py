@@ -1,6 +1,6 @@
 """DYNAMIXEL Protocol 2.0 framing: pure functions over bytes, no I/O.
 
-Packet layout (hardware-protocols.md section 2.2)::
+Packet layout (docs/protocols.md section 2.2)::
 
     Instruction: FF FF FD 00 | ID | LEN_L LEN_H | INST | params...       | CRC_L CRC_H
     Status:      FF FF FD 00 | ID | LEN_L LEN_H | 55   | ERR | params... | CRC_L CRC_H

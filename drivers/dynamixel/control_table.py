@@ -1,6 +1,6 @@
 """X-series control tables (Protocol 2.0) as data, unit conversions and fault names.
 
-Addresses, sizes and defaults follow hardware-protocols.md section 2.4. Units:
+Addresses, sizes and defaults follow docs/protocols.md section 2.4. Units:
 
 * position: 4096 pulses per revolution; Interbotix takes 2048 pulses as 0 rad, so
   ``rad = (pulses - 2048) * 2 pi / 4096``;

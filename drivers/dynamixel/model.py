@@ -1,4 +1,4 @@
-"""WX250s model facts (robots.md 1.2-1.3, hardware-protocols.md 2.5), data only, no I/O.
+"""WX250s model facts (docs/robots.md 1.2-1.3, docs/protocols.md 2.5), data only, no I/O.
 
 The one place for the arm's servo ids and models (XM430-W350 1020, XL430-W250 1060, the
 LoCoBot's 2XL430-W250 pan/tilt 1090, as the ROBOTIS e-Manual tables give them), register
@@ -76,7 +76,7 @@ PAN_TILT: tuple[JointSpec, ...] = (
         "tilt", 11, TWO_XL430_W250, 1024, 3072, -math.pi / 2, 1.309, effort=2.0, reversed=True
     ),
 )
-#: ``T_base_armbase`` of the LoCoBot: arm_base_link in base_link (robots.md 1.2)
+#: ``T_base_armbase`` of the LoCoBot: arm_base_link in base_link (docs/robots.md 1.2)
 LOCOBOT_MOUNT = (0.097277, 0.0, 0.10795)
 
 # --------------------------------------------------------------------------- gripper geometry

@@ -25,7 +25,7 @@ address 126 (current/load, velocity, position) for the joint ids, then advances 
 
 Positions are radians with 2048 pulses = 0 rad, velocities rad/s, efforts in amperes (XM
 servos) or fraction of maximum torque (XL430); the gripper width is metres between the
-finger pads, from the servo angle through the horn/arm linkage of hardware-protocols.md 2.5.
+finger pads, from the servo angle through the horn/arm linkage of docs/protocols.md 2.5.
 """
 
 from __future__ import annotations

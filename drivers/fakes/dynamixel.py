@@ -2,10 +2,10 @@
 
 Use it to rehearse bring-up without an arm (``mmexec hw fake dynamixel`` prints the port)
 and in tests. :class:`FakeDxlBus` parses instruction packets (with byte stuffing) from the
-driver and answers like X-series servos (hardware-protocols.md section 2.6):
+driver and answers like X-series servos (docs/protocols.md section 2.6):
 
 * one :class:`FakeServo` per id, built from the vendor's tables (model numbers of the ROBOTIS
-  e-Manual, the WX250s / LoCoBot bus of hardware-protocols.md 2.5; never from the driver's
+  e-Manual, the WX250s / LoCoBot bus of docs/protocols.md 2.5; never from the driver's
   model.py), with the X-series register layout of :mod:`mmexec.drivers.dynamixel.control_table`;
   EEPROM locked while torque is on (error 7), position limits (error 6), data length (5),
   data range (4: bad operating mode, goal write after the bus watchdog fired), unknown
@@ -67,7 +67,7 @@ _ALERT = 0x80
 #: pulses per second per velocity unit (0.229 rev/min)
 _PULSES_S_PER_UNIT = 0.229 * 4096.0 / 60.0
 
-# The servo facts below are copied from the vendor documents (hardware-protocols.md 2.4-2.5,
+# The servo facts below are copied from the vendor documents (docs/protocols.md 2.4-2.5,
 # the ROBOTIS e-Manual control tables, DynamixelSDK's dynamixel_item.h), not from the
 # driver's model (mmexec.drivers.dynamixel.model): a fake that reads the driver's table
 # agrees with the driver's mistakes. Only the register layout is shared
@@ -90,7 +90,7 @@ _LAYOUT: dict[str, Model] = {
     name: XM430_W350 if name.startswith("XM") else XL430_W250 for name in VENDOR_MODEL_NUMBERS
 }
 
-#: The WX250s bus (hardware-protocols.md 2.5): id, servo, Drive Mode bit 0 (reversed),
+#: The WX250s bus (docs/protocols.md 2.5): id, servo, Drive Mode bit 0 (reversed),
 #: Secondary ID (255: none), Min / Max Position Limit [pulses], joint index in the sleep
 #: pose (a shadow sits where its primary does; None: 2048 pulses)
 _WX250S_BUS: tuple[tuple[int, str, int, int, int, int, int | None], ...] = (
@@ -109,7 +109,7 @@ _LOCOBOT_HEAD: tuple[tuple[int, int, int, int, int], ...] = (
     (10, 0, 255, 1024, 3072),
     (11, 1, 255, 1024, 3072),
 )
-#: sleep poses [rad], waist .. wrist_rotate (hardware-protocols.md 2.5)
+#: sleep poses [rad], waist .. wrist_rotate (docs/protocols.md 2.5)
 _SLEEP = (0.0, -1.80, 1.55, 0.0, 0.8, 0.0)
 _LOCOBOT_SLEEP = (0.0, -1.1, 1.55, 0.0, 0.5, 0.0)
 
@@ -365,13 +365,13 @@ def wx250s_servos(
 ) -> list[FakeServo]:
     """The servos of a WX250s arm (ids 1-9; LoCoBot adds pan 10 and tilt 11) at the sleep pose.
 
-    The table is the vendor's (hardware-protocols.md 2.5), not the driver's. ``configured=False``
+    The table is the vendor's (docs/protocols.md 2.5), not the driver's. ``configured=False``
     leaves the EEPROM at factory values (apart from id and baud rate) so a driver's bring-up
     has to write them; True pre-applies the Interbotix settings. ``head`` is the servo of the
     LoCoBot's pan/tilt (a real LoCoBot: one 2XL430-W250, model 1090 on both ids).
     """
     sleep = _LOCOBOT_SLEEP if locobot else _SLEEP
-    # finger end stops: 30 mm and 74 mm between the pads (robots.md 1.3)
+    # finger end stops: 30 mm and 74 mm between the pads (docs/robots.md 1.3)
     grip_stops = (
         rad_to_pulses(gripper_angle_for_width(0.030)),
         rad_to_pulses(gripper_angle_for_width(0.074)),

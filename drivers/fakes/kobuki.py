@@ -13,7 +13,7 @@ Use it to test the driver and to rehearse bring-up without a robot::
 
 or from a shell: ``mmexec hw fake kobuki`` prints the port and serves until Ctrl-C.
 
-What it does (hardware-protocols.md 1.6):
+What it does (docs/protocols.md 1.6):
 
 * every 20 ms of fake time emits a frame with sub-payloads 1, 3, 4, 5, 6, 13, 16: a
   millisecond timestamp, wrapping uint16 encoders driven by the last Base Control
@@ -65,7 +65,7 @@ log = logging.getLogger(__name__)
 
 _TICKS_PER_MM = 1.0 / (k.TICK_TO_RAD * k.WHEEL_RADIUS * 1000.0)
 
-#: Safety conditions in the basic sensor data (id 1) as hardware-protocols.md 1.4 lays them
+#: Safety conditions in the basic sensor data (id 1) as docs/protocols.md 1.4 lays them
 #: out, written from that table (not from the driver's codec): name -> (field, bit).
 #: Overcurrent has the opposite bit order to bumper and wheel drop (0x01 is the left wheel).
 SAFETY_BITS: dict[str, tuple[str, int]] = {

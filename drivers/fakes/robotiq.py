@@ -2,11 +2,11 @@
 
 Users rehearse bring-up with these (``mmexec hw fake robotiq``) and the tests drive the real
 driver against them. Both share :class:`GripperModel`, a small model of the gripper's
-firmware built from hardware-protocols.md section 3:
+firmware built from docs/protocols.md section 3:
 
 * states reset (gSTA 0), activating (gSTA 1) and activated (gSTA 3). Activation takes
   ``activation_time`` s of gripper time (default 2 s: "seconds, not milliseconds" in the
-  vendor sequence of hardware-protocols.md 3.3; the exact figure is not published), during
+  vendor sequence of docs/protocols.md 3.3; the exact figure is not published), during
   which the fingers travel fully: closed in the first half, back open in the second
   (gPO shows it). ``activation_time = math.inf`` is an activation that never completes;
   lowering it later lets a held activation finish;

@@ -7,7 +7,7 @@ Frame (both directions)::
 ``checksum`` is the XOR of the length byte and every payload byte, so the XOR of
 every byte after the two headers, checksum included, is 0. A sub-payload is
 ``id | len | data``; multi-byte fields are little-endian, signed fields two's
-complement. See ``/work/shared/docs/hardware-protocols.md`` section 1.
+complement. See ``docs/protocols.md`` section 1.
 
 This module provides:
 
@@ -132,7 +132,7 @@ REQUEST_HARDWARE = 0x01
 REQUEST_FIRMWARE = 0x02
 REQUEST_UID = 0x08
 
-# geometry (hardware-protocols.md 1.5)
+# geometry (docs/protocols.md 1.5)
 WHEEL_RADIUS = 0.035  # m
 BIAS = 0.230  # m, wheel separation
 TICK_TO_RAD = 0.002436916871363930  # rad of wheel per encoder tick

@@ -1,7 +1,7 @@
 """Pure Modbus RTU codec for the Robotiq 2F-85: CRC, frames, register packing, commands, status.
 
 Everything here is a pure function over ``bytes`` (no port, no clock), so it is tested
-byte for byte against the examples of hardware-protocols.md section 3. Wire facts:
+byte for byte against the examples of docs/protocols.md section 3. Wire facts:
 
 * frame = ``slave | function | data | CRC_L CRC_H``; CRC-16/MODBUS (reflected polynomial
   0xA001, initial 0xFFFF, low byte first; check value 0x4B37); register values and
@@ -12,8 +12,8 @@ byte for byte against the examples of hardware-protocols.md section 3. Wire fact
 
 Validation failures raise :class:`~mmexec.drivers.robotiq.errors.FrameError`.
 
-SI conversions use the commonly quoted product figures (hardware-protocols.md 3.2 and
-robots.md 2.4 mark them unconfirmed): position 0..255 is width 0.085..0 m (linear),
+SI conversions use the commonly quoted product figures (docs/protocols.md 3.2 and
+docs/robots.md 2.4 mark them unconfirmed): position 0..255 is width 0.085..0 m (linear),
 speed 0..255 is 0.020..0.150 m/s, force 0..255 is 20..235 N.
 """
 

@@ -368,7 +368,7 @@ class RobotiqDevice(abc.ABC):
         last = self._last_cmd
         if last is not None and last.rGTO and last.rPR == cmd.rPR:
             # a gripper stopped on an object only moves again for a new position, a
-            # higher force or rGTO toggled 0 then 1 (hardware-protocols.md 3.3)
+            # higher force or rGTO toggled 0 then 1 (docs/protocols.md 3.3)
             self._enqueue(self._stop_command())
         seq = self._enqueue(cmd)
         self._move_cmd, self._move_seq = cmd, seq

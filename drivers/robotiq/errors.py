@@ -151,7 +151,7 @@ class AutoReleaseCompleted(RobotiqFault):
     """0x0F, major: automatic release completed."""
 
 
-#: The gFLT codes of the 2F-85 (hardware-protocols.md section 3.2), by code.
+#: The gFLT codes of the 2F-85 (docs/protocols.md section 3.2), by code.
 FAULTS: dict[int, tuple[FaultInfo, type[RobotiqFault]]] = {
     info.code: (info, cls)
     for info, cls in (

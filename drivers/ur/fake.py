@@ -11,7 +11,7 @@ takes fault injections at any time, also mid-motion::
     ctrl.protective_stop()   # safety mode 3, status bit 2, motion halts, moves return False
 
 Method names, argument order and return conventions follow ur_rtde 1.6.5
-(hardware-protocols.md 4.2/4.3): blocking moves return False rather than raise;
+(docs/protocols.md 4.2/4.3): blocking moves return False rather than raise;
 constructors and ``reconnect()`` raise ``RuntimeError("Error: Could not connect to: HOST at
 30004, verify the IP")`` when connections are refused; getters keep returning the last
 values after a connection loss; ``getInverseKinematics`` raises RuntimeError when no

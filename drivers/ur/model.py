@@ -1,4 +1,4 @@
-"""UR5e / UR3e model facts (robots.md section 2): joint names, limits, DH kinematics, frames.
+"""UR5e / UR3e model facts (docs/robots.md section 2): joint names, limits, DH kinematics, frames.
 
 Frames: the controller reports TCP poses in its ``base`` frame; the ROS description's
 ``base_link`` is ``base`` rotated by pi about z, so x and y flip sign between them. Joint
@@ -37,7 +37,7 @@ JOINT_NAMES: tuple[str, ...] = (
 
 MODELS = ("ur5e", "ur3e")
 
-#: Standard DH per model: (d, a, alpha) per joint [m, m, rad] (robots.md 2.1).
+#: Standard DH per model: (d, a, alpha) per joint [m, m, rad] (docs/robots.md 2.1).
 DH: dict[str, tuple[tuple[float, float, float], ...]] = {
     "ur5e": (
         (0.1625, 0.0, math.pi / 2),
@@ -68,7 +68,7 @@ T_BASELINK_BASE = np.array(
 
 
 def joint_limits(model: str, acceleration: float = math.inf) -> tuple[JointLimit, ...]:
-    """Limits from robots.md 2.2: positions [rad] (ROS description: ±2π, elbow ±π, UR3e
+    """Limits from docs/robots.md 2.2: positions [rad] (ROS description: ±2π, elbow ±π, UR3e
     wrist 3 continuous), max speeds [rad/s], torques [N m]; ``acceleration`` [rad/s^2] is
     not published by UR and comes from the config."""
     if model not in MODELS:

@@ -8,7 +8,7 @@ frequency: joint state, robot mode 7 (running), safety mode 1 (normal), runtime 
 (playing), robot status bits 0b11 (power on, program running), safety status bit 0.
 
 Why a separate process: ur_rtde's constructors block while holding the Python GIL, so a
-server thread in the same interpreter deadlocks them (hardware-protocols.md 4.3).
+server thread in the same interpreter deadlocks them (docs/protocols.md 4.3).
 
 Why port 30004: the ur_rtde 1.6.5 Python constructors take a host but no port, so a stub
 the real client talks to must listen on 30004. Tests run several stubs side by side on

@@ -1,7 +1,7 @@
 """A tiny URDF writer and the two robot descriptions mmexec simulates.
 
 The numbers come from the official descriptions as summarised in
-``shared/docs/robots.md`` (Interbotix LoCoBot / WX250s xacro, Kobuki description, UR
+``docs/robots.md`` (Interbotix LoCoBot / WX250s xacro, Kobuki description, UR
 ROS 2 description, Robotiq 2F-85 description). Geometry is primitive only (boxes,
 cylinders, spheres) so collision checks stay cheap. Lengths are metres, angles radians.
 
@@ -258,7 +258,7 @@ def locobot_wx250s() -> UrdfModel:
     return m
 
 
-#: UR5e-on-a-base: the base is not a published product (robots.md 2.x): these are sim
+#: UR5e-on-a-base: the base is not a published product (docs/robots.md 2.x): these are sim
 #: assumptions, also listed in MODEL_INFO and docs/sim.md.
 UR_BASE_WHEEL_RADIUS = 0.08
 UR_BASE_WHEEL_SEPARATION = 0.46

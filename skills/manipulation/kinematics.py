@@ -4,10 +4,10 @@ Frames: every pose is in the arm's mount frame (``arm_base`` in
 :mod:`mmexec.drivers.interfaces`: ``arm_base_link`` on the LoCoBot, ROS ``base_link`` of
 the UR, x forward, z up), as a 4x4 ``T_armbase_tool``. Units: m, rad.
 
-* WX250s (LoCoBot variant): the Interbotix PoE parameters (robots.md 1.3) with every
+* WX250s (LoCoBot variant): the Interbotix PoE parameters (docs/robots.md 1.3) with every
   height lowered by 0.005825 m; tool frame ``ee_gripper_link`` (between the finger pads,
   x = approach direction out of the gripper, y = finger travel, z up at zero pose).
-* UR5e: the official DH table (robots.md 2.1), converted to PoE and rotated by pi about
+* UR5e: the official DH table (docs/robots.md 2.1), converted to PoE and rotated by pi about
   z so the base is ROS ``base_link`` (the controller's ``base`` frame is x/y flipped);
   tool frame ``tool0`` (z out of the flange) plus a TCP offset along tool z (default
   0.155 m: the Robotiq 2F-85's closed-grasp point), so z is the approach direction.
@@ -310,7 +310,7 @@ def wx250s(*, locobot: bool = True, acceleration: float = 5.0) -> ArmKinematics:
                          screws, M, limits, approach_axis=0)
 
 
-#: UR5e standard DH rows ``(d, a, alpha)`` [m, m, rad]: the driver's table (robots.md 2.1).
+#: UR5e standard DH rows ``(d, a, alpha)`` [m, m, rad]: the driver's table (docs/robots.md 2.1).
 UR5E_DH: tuple[tuple[float, float, float], ...] = urmodel.DH["ur5e"]
 
 

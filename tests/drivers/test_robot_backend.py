@@ -210,7 +210,7 @@ def test_shipped_ur5e_config_loads() -> None:
     loaded = load_config(REPO / "config" / "ur5e.yaml")
     assert loaded.backend == "robot"
     section = loaded.section()
-    # the platform's base is not identified (robots.md 2): the config may run the arm fixed
+    # the platform's base is not identified (docs/robots.md 2): the config may run the arm fixed
     base = [f"base: kobuki on {section['base']['port']}"] if "base" in section else []
     assert rb.check(section, profile=loaded.config.profile) == [
         *base, "arm: ur5e at 192.168.1.10", "gripper: robotiq on 192.168.1.10:63352", "camera: realsense 0",

@@ -192,7 +192,7 @@ def test_ur5e_wrist_camera_follows_the_arm(video: Path) -> None:
                     clock=clock, link_pose=functools.partial(rb._ur_tool0_in_base, robot, "ur5e"))
     try:
         assert _wait(lambda: arm.state().positions == (0.0,) * 6)
-        # UR5e zero pose (robots.md 2.1/2.3): tool0 at (a2 + a3, d4 + d6, d1 - d5) with x, y
+        # UR5e zero pose (docs/robots.md 2.1/2.3): tool0 at (a2 + a3, d4 + d6, d1 - d5) with x, y
         # flipped into base_link, its z axis along base_link +y; the camera 0.04 m out on z
         tool0 = np.array([0.425 + 0.3922, 0.1333 + 0.0996, 0.1625 - 0.0997])
         T = cam.pose_in_base()
@@ -224,7 +224,7 @@ def test_shipped_locobot_camera_is_the_d435_at_pan_tilt_zero() -> None:
     assert link == "base_link" and (cam.width, cam.height) == (640, 480)
     intr = cam.camera_intrinsics()
     assert intr is not None and intr.fx == pytest.approx(589.367, abs=1e-3) and intr.fx == intr.fy
-    # robots.md 1.2: camera_depth_link in base_footprint, quat (x, y, z, w) = (-0.5, 0.5, -0.5, 0.5)
+    # docs/robots.md 1.2: camera_depth_link in base_footprint, quat (x, y, z, w) = (-0.5, 0.5, -0.5, 0.5)
     x, y, z, w = -0.5, 0.5, -0.5, 0.5
     R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                   [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],

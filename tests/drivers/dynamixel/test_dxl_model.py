@@ -1,6 +1,6 @@
 """The driver's WX250s model (model.py) against the vendor table the fake bus holds.
 
-The fake is written from hardware-protocols.md 2.4-2.5 and the ROBOTIS e-Manual, not from
+The fake is written from docs/protocols.md 2.4-2.5 and the ROBOTIS e-Manual, not from
 model.py, so these checks catch a wrong fact in the driver without a bus.
 """
 

@@ -27,13 +27,13 @@ def test_crc_check_value() -> None:
 
 
 def test_doc_example_read_frame() -> None:
-    # hardware-protocols.md 3.1: FC03, slave 1, 3 registers at 0x07D0
+    # docs/protocols.md 3.1: FC03, slave 1, 3 registers at 0x07D0
     assert codec.encode_read(1, 3, 0x07D0, 3) == h("01 03 07 D0 00 03 05 46")
     assert codec.check_crc(h("01 03 07 D0 00 03 05 46"))
     assert not codec.check_crc(h("01 03 07 D0 00 03 05 47"))
 
 
-# Hand-built frames for slave 9 (CRC low byte first), per hardware-protocols.md 3.2/3.3.
+# Hand-built frames for slave 9 (CRC low byte first), per docs/protocols.md 3.2/3.3.
 RESET = "09 10 03 E8 00 03 06 00 00 00 00 00 00 73 30"
 ACTIVATE = "09 10 03 E8 00 03 06 01 00 00 00 00 00 72 E1"
 CLOSE_FULL = "09 10 03 E8 00 03 06 09 00 00 FF FF FF 42 29"

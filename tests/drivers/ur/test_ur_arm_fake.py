@@ -282,8 +282,8 @@ def test_tcp_pose_in_ros_base_link(rig: tuple[URArm, FakeURController, ManualClo
     g = arm.move_to((0.0,) * 6, speed_scale=1.0)
     step_until(arm, clock, g)
     T_bl = arm.tcp_pose()
-    assert T_bl[:3, 3] == pytest.approx([0.8172, 0.2329, 0.0628], abs=1e-3)  # robots.md 2.1
-    # tool0 z axis along +y of base_link at the zero pose (robots.md 2.3)
+    assert T_bl[:3, 3] == pytest.approx([0.8172, 0.2329, 0.0628], abs=1e-3)  # docs/robots.md 2.1
+    # tool0 z axis along +y of base_link at the zero pose (docs/robots.md 2.3)
     assert T_bl[:3, 2] == pytest.approx([0.0, 1.0, 0.0], abs=1e-3)
 
 

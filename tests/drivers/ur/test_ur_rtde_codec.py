@@ -1,4 +1,4 @@
-"""RTDE codec: frames built by hand from the wire description (hardware-protocols.md 4.4)."""
+"""RTDE codec: frames built by hand from the wire description (docs/protocols.md 4.4)."""
 
 from __future__ import annotations
 
