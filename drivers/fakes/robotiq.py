@@ -29,7 +29,9 @@ firmware built from docs/protocols.md section 3:
 :class:`FakeRobotiq` is slave 9 on a pseudo-terminal: FC03/04/06/16/23 on the two register
 blocks, silence for bad-CRC frames, other slave ids, unknown functions and addresses
 outside the blocks; fault switches ``no_reply`` (requests understood, never answered) and
-``corrupt_replies`` (answers with a broken CRC) on top of the PtyDevice ones (``silent``,
+``corrupt_replies`` (answers with a broken CRC), and for link-quality tests ``drop_every``
+/ ``corrupt_every`` (every n-th answer lost / with a broken CRC; 0 = off), on top of the
+PtyDevice ones (``silent``,
 ``unplug()``, ``inject()``).
 
 :class:`FakeURCap` serves the URCap's text protocol on 127.0.0.1 (ephemeral port by
@@ -330,6 +332,9 @@ class FakeRobotiq(PtyDevice):
         self.slave = slave
         self.no_reply = False
         self.corrupt_replies = False
+        self.drop_every = 0
+        self.corrupt_every = 0
+        self._answers = 0  # answers the slave had to give (for the every-n-th switches)
         self._buf = bytearray()
         self._rx_time = 0.0
         self._out_regs = [0] * 8
@@ -394,10 +399,12 @@ class FakeRobotiq(PtyDevice):
             if regs is None:
                 return
             reply = codec.encode_read_reply(req.slave, fc, regs)
-        if reply is None or self.no_reply:
+        if reply is not None:
+            self._answers += 1
+        if reply is None or self.no_reply or _nth(self._answers, self.drop_every):
             self.model.after_request()
             return
-        if self.corrupt_replies:
+        if self.corrupt_replies or _nth(self._answers, self.corrupt_every):
             reply = reply[:-2] + bytes(((reply[-2] ^ 0xFF), reply[-1]))
         self.send(reply)
         self.model.after_request()
@@ -413,6 +420,11 @@ class FakeRobotiq(PtyDevice):
             start = address - codec.OUTPUT_BASE
             return self._out_regs[start:start + count]
         return None
+
+
+def _nth(count: int, every: int) -> bool:
+    """True for every ``every``-th ``count`` (never when ``every`` is 0)."""
+    return every > 0 and count % every == 0
 
 
 def frame_echo(req: codec.Request) -> bytes:
@@ -431,8 +443,10 @@ class FakeURCap:
 
     ``port`` 0 picks a free ephemeral port (read it back from :attr:`port` after
     :meth:`start`). Switches: ``estop`` (GET answers ``VAR ?``), ``silent`` (requests
-    are read, never answered), :meth:`drop_clients` (connection reset).
-    """
+    are read, never answered), :meth:`drop_clients` (connection reset), and for
+    link-quality tests ``drop_every`` / ``garble_every`` (every n-th answer lost / garbled;
+    0 = off); ``answer_delay`` [s] before each answer (a busy controller; it delays the
+    whole server, which has one thread)."""
 
     def __init__(self, model: GripperModel | None = None, *, host: str = "127.0.0.1",
                  port: int = 0, **model_args: object) -> None:
@@ -442,6 +456,10 @@ class FakeURCap:
         self.port = 0
         self.estop = False
         self.silent = False
+        self.drop_every = 0
+        self.garble_every = 0
+        self.answer_delay = 0.0
+        self._answers = 0
         self._server: socket.socket | None = None
         self._sel: selectors.BaseSelector | None = None
         self._clients: dict[socket.socket, bytearray] = {}
@@ -544,7 +562,15 @@ class FakeURCap:
                 lines.append(line.decode("ascii", "replace").strip())
         for line in lines:
             answer = self.handle(line, now)
+            if answer is not None:
+                self._answers += 1
+                if _nth(self._answers, self.drop_every):
+                    continue
+                if _nth(self._answers, self.garble_every):
+                    answer = answer.replace(" ", "\x7f", 1)
             if answer is not None and not self.silent:
+                if self.answer_delay > 0:
+                    time.sleep(self.answer_delay)
                 try:
                     conn.sendall(answer.encode("ascii") + b"\n")
                 except OSError as e:

@@ -1,10 +1,27 @@
 """Bring-up for the Robotiq 2F-85: ``mmexec hw ping robotiq`` and ``mmexec hw fake robotiq``.
 
-``ping`` opens the gripper (Modbus RTU on ``--port``, or the URCap socket with ``--host``),
-reads its status and prints one line (state, fault, position, object); ``--activate`` runs
-the activation sequence first. Any problem is one line on stderr naming device and port
-(no such port, permission denied, no answer within the deadline, corrupt frames, device
-fault) and a non-zero exit. ``run_fake`` serves a fake gripper and prints its port.
+``ping`` opens the gripper (Modbus RTU on ``--port``, or the URCap socket with ``--host``);
+``--activate`` runs the activation sequence first. It then reads the status ``--reads``
+more times (the driver's I/O thread polls every 20 ms) and prints one line on stdout::
+
+    robotiq on /dev/ttyUSB0: activated, fault none, position 0.0850 m (gPO 0), at requested position; link: 21 exchanges, 0 lost, 0 corrupt (0.0 %)
+
+Fault 0x09 "no communication" is what a gripper reports after more than a second without
+traffic (e.g. between ``ping --activate`` and the next ``ping``) and clears when traffic
+resumes: the ping reads until it clears or the reads are spent, then judges.
+
+Exit status, with at most one line on stderr naming the device, the port and the reason:
+
+* 0: ready. A line ``warning: ...`` when more than 1 % of the exchanges were lost (no
+  answer before the deadline) or corrupt (bad CRC or frame).
+* 1: the gripper answered but is not fit to run: a gFLT fault (a 0x09 that does not clear
+  included), activation failed, the robot is emergency-stopped (URCap), the link failed
+  during the ping; or it gave no useful answer (no answer within the deadline, only
+  corrupt frames).
+* 2: bad input, or the port or socket cannot be opened (no such port, permission denied,
+  busy, connection refused).
+
+``run_fake`` serves a fake gripper and prints its port.
 """
 
 from __future__ import annotations
@@ -16,14 +33,33 @@ import threading
 import time
 from types import FrameType
 
+from mmexec.drivers.interfaces import GoalState
 from mmexec.drivers.robotiq import codec
 from mmexec.drivers.robotiq.codec import Status
-from mmexec.drivers.robotiq.core import DeviceSettings, RobotiqDevice
+from mmexec.drivers.robotiq.core import DeviceSettings, LinkState, LinkStats, RobotiqDevice
 from mmexec.drivers.robotiq.device import ModbusSettings, RobotiqModbus
-from mmexec.drivers.robotiq.errors import RobotiqError, RobotiqLinkError, fault_error
+from mmexec.drivers.robotiq.errors import (
+    RobotiqError,
+    RobotiqLinkError,
+    RobotiqPortUnavailable,
+    fault_error,
+)
 from mmexec.drivers.robotiq.urcap import URCAP_PORT, RobotiqURCap, URCapSettings
 
-__all__ = ["add_fake_arguments", "add_ping_arguments", "describe", "ping", "run_fake"]
+__all__ = [
+    "LINK_WARN_RATIO",
+    "add_fake_arguments",
+    "add_ping_arguments",
+    "describe",
+    "ping",
+    "run_fake",
+]
+
+#: ping warns when more than this fraction of the exchanges were lost or corrupt
+LINK_WARN_RATIO = 0.01
+#: the transient fault a gripper reports after more than 1 s without traffic
+NO_COMMUNICATION = 0x09
+_BACKSTOP = 5.0  # s beyond a wait's own bound before the CLI gives up on the driver
 
 _STA = {0: "reset", 1: "activating", 2: "unused state 2", 3: "activated"}
 _OBJ = {0: "moving", 1: "object caught while opening", 2: "object caught while closing",
@@ -46,6 +82,9 @@ def add_ping_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--activate", action="store_true",
                         help="run the activation sequence (the fingers travel fully!)")
     parser.add_argument("--activation-timeout", type=float, default=10.0, help="seconds")
+    parser.add_argument("--reads", type=int, default=20,
+                        help="status reads after the first, for faults and link quality "
+                             "(default %(default)s, 1..1000)")
 
 
 def describe(status: Status) -> str:
@@ -58,6 +97,8 @@ def describe(status: Status) -> str:
 
 
 def _device(args: argparse.Namespace) -> tuple[RobotiqDevice, str]:
+    if not 1 <= args.reads <= 1000:
+        raise ValueError(f"--reads must be in 1..1000, got {args.reads}")
     settings = DeviceSettings(activation_timeout=args.activation_timeout)
     if args.host:
         where = f"{args.host}:{args.tcp_port}"
@@ -75,7 +116,7 @@ def _reason(e: RobotiqError) -> str:
 
 
 def ping(args: argparse.Namespace) -> int:
-    """Read (and with --activate, activate) the gripper; 0 when it answers without fault."""
+    """Read (and with --activate, activate) the gripper; exit status as the module says."""
     try:
         dev, name = _device(args)
     except ValueError as e:
@@ -85,27 +126,70 @@ def ping(args: argparse.Namespace) -> int:
         status = dev.open()
     except RobotiqError as e:
         print(f"{name}: {_reason(e)}", file=sys.stderr)
-        return 1
+        return 2 if isinstance(e, RobotiqPortUnavailable) else 1
     try:
-        if args.activate:
-            goal = dev.activate()
-            deadline = time.monotonic() + args.activation_timeout + 1.0
-            while not goal.done() and time.monotonic() < deadline:
-                time.sleep(0.02)  # a CLI waiting for its one action, not a tick
-            if not goal.done():
-                goal.cancel()
-            if goal.state.name != "SUCCEEDED":
-                print(f"{name}: activation failed: {goal.reason.split(': ', 1)[-1]}",
-                      file=sys.stderr)
-                return 1
-            status = dev.status() or status
-        if status.gFLT:
-            print(f"{name}: device fault: {describe(status)}", file=sys.stderr)
-            return 1
-        print(f"{name}: {describe(status)}")
-        return 0
+        problem = _activate(dev) if args.activate else ""
+        if not problem:
+            status, problem = _sample(dev, status, args.reads)
+        stats = dev.link_stats()
     finally:
         dev.close()
+    print(f"{name}: {describe(status)}; link: {_link_text(stats)}")
+    if not problem and status.gFLT:
+        problem = f"device fault: {describe(status)}"
+        if status.gFLT == NO_COMMUNICATION:
+            problem += f" (did not clear over {args.reads} reads)"
+    poor = stats.failure_rate > LINK_WARN_RATIO
+    note = (f"link quality {100 * stats.failure_rate:.1f} % lost or corrupt (above "
+            f"{100 * LINK_WARN_RATIO:g} %: check the cable, the RS-485 adapter and the baud "
+            "rate)")
+    if problem:
+        print(f"{name}: {problem}" + (f"; also {note}" if poor else ""), file=sys.stderr)
+        return 1
+    if poor:
+        print(f"{name}: warning: {note}", file=sys.stderr)
+    return 0
+
+
+def _activate(dev: RobotiqDevice) -> str:
+    """Run the activation goal to its end; "" or the reason. The goal's own deadline
+    (activation timeout, on the device's clock) ends it; ours is a backstop."""
+    goal = dev.activate()
+    backstop = dev.clock.now() + dev.settings.activation_timeout + _BACKSTOP
+    while not goal.done() and dev.clock.now() < backstop:
+        time.sleep(0.02)  # a CLI waiting for its one action, not a tick
+    if not goal.done():
+        goal.cancel()
+        return (f"activation failed: no result within "
+                f"{dev.settings.activation_timeout + _BACKSTOP:g} s")
+    if goal.state is GoalState.SUCCEEDED:
+        return ""
+    return f"activation failed: {goal.reason.removeprefix(dev.where + ': ')}"
+
+
+def _sample(dev: RobotiqDevice, first: Status, reads: int) -> tuple[Status, str]:
+    """Let the I/O thread read the status ``reads`` more times (link quality; a 0x09 has
+    that long to clear); the last status and "" or why the link is not fit. Ends early
+    when the link fails (bounded by the link's own deadlines and failure count)."""
+    target = dev.link_stats().reads + reads
+    backstop = dev.clock.now() + 10 * reads * dev.settings.poll_period + _BACKSTOP
+    status = first
+    while True:
+        status = dev.status() or status
+        err = dev.link_error
+        if dev.link_state is not LinkState.CONNECTED and err is not None:
+            return status, f"link failed during the ping: {_reason(err)}"
+        if dev.link_stats().reads >= target:
+            return status, ""
+        if dev.clock.now() > backstop:
+            done = dev.link_stats().reads - (target - reads)
+            return status, f"only {done} of {reads} status reads came back in time"
+        time.sleep(dev.settings.poll_period)
+
+
+def _link_text(stats: LinkStats) -> str:
+    return (f"{stats.exchanges} exchanges, {stats.lost} lost, {stats.corrupt} corrupt "
+            f"({100 * stats.failure_rate:.1f} %)")
 
 
 def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
@@ -122,6 +206,10 @@ def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fault", type=lambda t: int(t, 0), default=None, metavar="CODE",
                         help="start with gFLT CODE, e.g. 0x0A (major faults 0x0A/0x0C/0x0E "
                              "stay until re-activation; 0x08 over-temperature)")
+    parser.add_argument("--drop-every", type=int, default=0, metavar="N",
+                        help="lose every N-th answer (a noisy link; default 0: none)")
+    parser.add_argument("--corrupt-every", type=int, default=0, metavar="N",
+                        help="corrupt every N-th answer (bad CRC, or a garbled URCap line)")
 
 
 def run_fake(args: argparse.Namespace) -> int:
@@ -137,6 +225,10 @@ def run_fake(args: argparse.Namespace) -> int:
         except ValueError as e:
             print(f"robotiq fake: --fault: {e}", file=sys.stderr)
             return 2
+    for flag in ("drop_every", "corrupt_every"):
+        if getattr(args, flag) < 0:
+            print(f"robotiq fake: --{flag.replace('_', '-')} must be >= 0", file=sys.stderr)
+            return 2
     stop = threading.Event()
 
     def on_signal(signum: int, frame: FrameType | None) -> None:
@@ -146,11 +238,13 @@ def run_fake(args: argparse.Namespace) -> int:
     try:
         if args.urcap:
             with FakeURCap(model, port=args.tcp_port) as server:
+                server.drop_every, server.garble_every = args.drop_every, args.corrupt_every
                 print(f"127.0.0.1:{server.port}", flush=True)
                 while not stop.wait(0.2):
                     pass
         else:
             with FakeRobotiq(model) as fake:
+                fake.drop_every, fake.corrupt_every = args.drop_every, args.corrupt_every
                 print(fake.port, flush=True)
                 while not stop.wait(0.2):
                     pass

@@ -28,8 +28,9 @@ import collections
 import enum
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Self
+from typing import Any, Self, TypeVar
 
 from mmexec.drivers.interfaces import (
     Clock,
@@ -43,16 +44,25 @@ from mmexec.drivers.robotiq import codec
 from mmexec.drivers.robotiq.codec import Command, Status
 from mmexec.drivers.robotiq.errors import (
     EmergencyStopped,
+    RobotiqCorruptFrame,
     RobotiqError,
     RobotiqLinkError,
     RobotiqLinkLost,
     RobotiqNotReady,
+    RobotiqTimeout,
     fault_error,
 )
 
-__all__ = ["DeviceSettings", "LinkState", "RobotiqDevice"]
+__all__ = ["DeviceSettings", "LinkState", "LinkStats", "RobotiqDevice"]
 
 log = logging.getLogger(__name__)
+
+_T = TypeVar("_T")
+
+
+class _Closing(Exception):
+    """Raised inside the I/O thread's exchange once :meth:`RobotiqDevice.close` asked the
+    thread to end (never escapes the thread)."""
 
 
 
@@ -94,6 +104,23 @@ class DeviceSettings:
             raise ValueError("activation_timeout and move_margin must be > 0 s")
 
 
+@dataclass(frozen=True)
+class LinkStats:
+    """Exchanges with the gripper since :meth:`RobotiqDevice.open`: ``exchanges`` tried
+    (command writes and status reads), of which ``lost`` got no (complete) answer before the
+    deadline and ``corrupt`` a bad frame; ``reads`` status reads that succeeded."""
+
+    exchanges: int = 0
+    lost: int = 0
+    corrupt: int = 0
+    reads: int = 0
+
+    @property
+    def failure_rate(self) -> float:
+        """Fraction of the exchanges that were lost or corrupt (0 when none were tried)."""
+        return (self.lost + self.corrupt) / self.exchanges if self.exchanges else 0.0
+
+
 @dataclass
 class _Track:
     """A goal the I/O thread advances: its kind, the command it waits on, its deadline."""
@@ -133,6 +160,7 @@ class RobotiqDevice(abc.ABC):
         self._move_seq = 0
         self._thread: threading.Thread | None = None
         self._stop_evt = threading.Event()
+        self._stats = LinkStats()
 
     # ------------------------------------------------------------------ link (subclasses)
     @property
@@ -162,6 +190,12 @@ class RobotiqDevice(abc.ABC):
         with self._lock:
             return self._link_state
 
+    @property
+    def link_error(self) -> RobotiqError | None:
+        """Why the link is not CONNECTED (None while it is, or before :meth:`open`)."""
+        with self._lock:
+            return self._link_error
+
     def open(self) -> Status:
         """Connect, read the status once (the gripper must answer), start the I/O thread.
 
@@ -172,8 +206,11 @@ class RobotiqDevice(abc.ABC):
         if self._thread is not None:
             raise RobotiqNotReady(f"{self.where}: already open (call close() first)")
         self._connect()
+        self._stop_evt.clear()
+        with self._lock:
+            self._stats = LinkStats()
         try:
-            status = self._read_status()
+            status = self._counted(self._read_status)
         except (RobotiqError, OSError):
             self._disconnect()
             raise
@@ -185,7 +222,6 @@ class RobotiqDevice(abc.ABC):
             self._link_state = LinkState.CONNECTED
             self._link_error = None
             self._failures = 0
-        self._stop_evt.clear()
         self._thread = threading.Thread(target=self._run, name=f"{self.where}-io", daemon=True)
         self._thread.start()
         log.info("%s: open, status %s", self.where, status)
@@ -463,12 +499,14 @@ class RobotiqDevice(abc.ABC):
                 cmd = self._queue[0] if self._queue else None
             try:
                 if cmd is not None:
-                    self._write_command(cmd)
+                    self._counted(self._write_command, cmd)
                     with self._lock:
                         self._queue.popleft()
                         self._seq += 1
                         self._on_written(cmd)
-                status = self._read_status()
+                status = self._counted(self._read_status)
+            except _Closing:
+                return  # close() takes it from here (and stops a running move)
             except EmergencyStopped as e:
                 self._on_link_problem(LinkState.ESTOP, e, fail_now=True)
             except RobotiqLinkLost as e:
@@ -484,6 +522,36 @@ class RobotiqDevice(abc.ABC):
             if self._queue:
                 continue  # the link itself spaces requests; send queued commands promptly
             self._stop_evt.wait(period)
+
+    def _check_closing(self) -> None:
+        """For links whose one exchange is several round trips (the URCap's status read):
+        call between them, so :meth:`close` waits for one round trip, not all of them."""
+        if self._stop_evt.is_set():
+            raise _Closing
+
+    def link_stats(self) -> LinkStats:
+        """Exchange counts since :meth:`open` (link quality). Never blocks on I/O."""
+        with self._lock:
+            return self._stats
+
+    def _counted(self, exchange: Callable[..., _T], *args: Any) -> _T:
+        """Run one exchange with the gripper, counting it (and how it failed) in the stats."""
+        lost = corrupt = read = 0
+        try:
+            result = exchange(*args)
+            read = int(isinstance(result, Status))
+            return result
+        except RobotiqTimeout:
+            lost = 1
+            raise
+        except RobotiqCorruptFrame:
+            corrupt = 1
+            raise
+        finally:
+            with self._lock:
+                st = self._stats
+                self._stats = LinkStats(st.exchanges + 1, st.lost + lost, st.corrupt + corrupt,
+                                        st.reads + read)
 
     def _on_written(self, cmd: Command) -> None:
         if self._move_cmd is not None and cmd is self._move_cmd:

@@ -27,6 +27,7 @@ from mmexec.drivers.robotiq.errors import (
     RobotiqCorruptFrame,
     RobotiqLinkError,
     RobotiqLinkLost,
+    RobotiqPortUnavailable,
     RobotiqTimeout,
 )
 from mmexec.drivers.transport import (
@@ -90,7 +91,7 @@ class RobotiqModbus(RobotiqDevice):
         try:
             self._transport.open()
         except LinkError as e:
-            raise RobotiqLinkError(self.link.port, f"robotiq: {e.detail}") from e
+            raise RobotiqPortUnavailable(self.link.port, f"robotiq: {e.detail}") from e
 
     def _disconnect(self) -> None:
         self._transport.close()

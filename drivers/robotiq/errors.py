@@ -2,7 +2,8 @@
 
 * :class:`RobotiqError`: base of everything this package raises.
 * Link errors (:class:`RobotiqLinkError` and subclasses) are problems of the cable, port or
-  socket: no answer before the deadline, corrupt frames, link lost. They are also
+  socket: the port or socket cannot be opened, no answer before the deadline, corrupt
+  frames, link lost. They are also
   :class:`mmexec.drivers.transport.LinkError` subclasses, so they carry ``.port``.
 * Device faults (:class:`RobotiqFault` and one subclass per gFLT code) are what the gripper
   reports about itself in its FAULT STATUS byte; each knows its class (priority, minor,
@@ -39,6 +40,7 @@ __all__ = [
     "RobotiqLinkError",
     "RobotiqLinkLost",
     "RobotiqNotReady",
+    "RobotiqPortUnavailable",
     "RobotiqTimeout",
     "UnderVoltage",
     "fault_error",
@@ -56,6 +58,11 @@ class FrameError(RobotiqError, ValueError):
 
 class RobotiqLinkError(RobotiqError, LinkError):
     """The link to the gripper failed (port, cable, socket, timing), not the gripper."""
+
+
+class RobotiqPortUnavailable(RobotiqLinkError):
+    """The port or socket could not be opened (no such port, permission denied, busy,
+    connection refused, host unreachable): nothing was said to the gripper."""
 
 
 class RobotiqTimeout(RobotiqLinkError, LinkTimeout):

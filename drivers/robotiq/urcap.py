@@ -25,8 +25,8 @@ from mmexec.drivers.robotiq.core import DeviceSettings, RobotiqDevice
 from mmexec.drivers.robotiq.errors import (
     EmergencyStopped,
     RobotiqCorruptFrame,
-    RobotiqLinkError,
     RobotiqLinkLost,
+    RobotiqPortUnavailable,
     RobotiqTimeout,
 )
 
@@ -98,13 +98,16 @@ class RobotiqURCap(RobotiqDevice):
             sock = socket.create_connection((self.link.host, self.link.port),
                                             timeout=self.link.connect_timeout)
         except ConnectionRefusedError as e:
-            raise RobotiqLinkError(self._addr, "robotiq urcap: connection refused (is the "
-                                   "Robotiq URCap installed and the controller on?)") from e
+            raise RobotiqPortUnavailable(self._addr, "robotiq urcap: connection refused (is "
+                                         "the Robotiq URCap installed and the controller "
+                                         "on?)") from e
         except TimeoutError as e:
-            raise RobotiqTimeout(self._addr, "robotiq urcap: no answer within the deadline "
-                                 f"({self.link.connect_timeout:g} s to connect)") from e
+            raise RobotiqPortUnavailable(self._addr, "robotiq urcap: no answer within the "
+                                         f"deadline ({self.link.connect_timeout:g} s to "
+                                         "connect)") from e
         except OSError as e:
-            raise RobotiqLinkError(self._addr, f"robotiq urcap: cannot connect ({e})") from e
+            raise RobotiqPortUnavailable(self._addr, f"robotiq urcap: cannot connect ({e})") \
+                from e
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock = sock
         self._rx.clear()
@@ -156,6 +159,7 @@ class RobotiqURCap(RobotiqDevice):
     def _read_status(self) -> Status:
         values: dict[str, int] = {}
         for var in _STATUS_VARS:
+            self._check_closing()
             answer = self.request(f"GET {var}\n".encode("ascii"))
             try:
                 v = parse_get_reply(var, answer)

@@ -136,3 +136,16 @@ def test_connection_dropped(server: FakeURCap) -> None:
         assert finish(g.activate()) is GoalState.SUCCEEDED
     finally:
         g.disconnect()
+
+
+def test_close_waits_for_one_round_trip_not_a_whole_status_read(server: FakeURCap) -> None:
+    # a status read through the URCap is seven GETs; with a slow controller close() must
+    # not wait for all of them: no request is sent after close() began
+    dev = RobotiqURCap(URCapSettings("127.0.0.1", server.port, reply_timeout=0.5))
+    dev.open()
+    server.answer_delay = 0.05
+    n = len(server.requests)
+    assert wait_for(lambda: len(server.requests) >= n + 2, 2.0)   # a read is under way
+    at_close = len(server.requests)
+    dev.close()
+    assert len(server.requests) <= at_close + 1
