@@ -1,15 +1,19 @@
 """The BT.CPP / Nav2 vocabulary table of docs/missions.md against real public trees.
 
 The XML files are read in place from ``../shared/interop-samples`` beside the checkout
-(never copied into the project); their sha256 must match SOURCES.md there. Every
-control or decorator node type they use must be in the table of docs/missions.md,
-either mapped onto existing mmexec node types and options or marked unsupported with a
-reason. This is a vocabulary check, not an XML importer.
+(never copied into the project: they are other projects' files); their sha256 must match
+SOURCES.md there. Every control or decorator node type they use must be in the table of
+docs/missions.md, either mapped onto existing mmexec node types and options or marked
+unsupported with a reason. This is a vocabulary check, not an XML importer.
+
+A public clone has no such folder: the tests that read the samples then skip, saying
+why. Under CI (``CI=true``), which provides the folder, its absence is a failure.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import xml.etree.ElementTree as ET
 from collections import defaultdict
@@ -30,12 +34,13 @@ GENERIC_ATTRS = {"name"}
 
 
 def samples_dir() -> Path:
+    """The samples folder; skips the calling test when it is absent (fails under CI)."""
     if not (SAMPLES / "SOURCES.md").is_file():
-        pytest.fail(
-            f"interop samples not found: expected {SAMPLES}/SOURCES.md (the shared folder "
-            f"'shared/interop-samples' must sit beside the checkout, as on CI)",
-            pytrace=False,
-        )
+        reason = (f"interop samples not found: expected {SAMPLES}/SOURCES.md (the folder "
+                  f"'shared/interop-samples' beside the checkout, which CI provides)")
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"{reason}; CI=true, so its absence is a failure", pytrace=False)
+        pytest.skip(f"{reason}; not part of the repository, so the sample checks are skipped")
     return SAMPLES
 
 
@@ -210,11 +215,21 @@ def test_bt_cpp_num_attempts_is_retry_attempts(h):
 # -- the checks themselves fail when they should ---------------------------------------
 
 
-def test_missing_shared_folder_fails_with_a_clear_message(monkeypatch, tmp_path):
+def test_missing_samples_folder_skips_with_the_reason(monkeypatch, tmp_path):
     import test_interop_samples as me
 
     monkeypatch.setattr(me, "SAMPLES", tmp_path / "nowhere")
-    with pytest.raises(pytest.fail.Exception, match=r"interop samples not found: expected .*nowhere/SOURCES.md"):
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match=r"interop samples not found: expected .*nowhere/SOURCES.md"):
+        me.samples_dir()
+
+
+def test_missing_samples_folder_fails_under_ci(monkeypatch, tmp_path):
+    import test_interop_samples as me
+
+    monkeypatch.setattr(me, "SAMPLES", tmp_path / "nowhere")
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match=r"expected .*nowhere/SOURCES.md .*CI=true, so its absence"):
         me.samples_dir()
 
 
