@@ -2,8 +2,8 @@
 
 Every record is a JSON object with at least ``event`` (the record type) and ``seq``
 (0, 1, 2, ... in write order); records written during a run also carry ``t``, the clock
-time [s] of the backend (sim time in sim, monotonic seconds on the robot). Record types
-written by the runner:
+time [s] of the backend, counted from its start (sim time in sim, wall-clock seconds on
+the robot). Record types written by the runner:
 
 ======================  ===================================================================
 ``run_start``           mission path + sha256, config path + sha256, backend, seed, argv,
