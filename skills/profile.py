@@ -23,7 +23,9 @@ understands). Its fields carry their unit, range and meaning through :func:`sett
     declare_section("dock", DockSettings, package=__name__, doc="docking skills")
 
 Ranges are checked on the values as written (the mark of each value is kept); checks
-that relate several keys stay in the dataclass's ``validate()`` method. ``base_pose``
+that relate several keys stay in the dataclass's ``validate()`` method. ``refers_to``
+marks a name that must be a key of another section (``stow: tuck`` names one of the
+``named_poses``), checked with a did-you-mean, its default included. ``base_pose``
 marks ``[x, y, theta]`` base poses in ``map`` [m, m, rad] (single, list or mapping of
 them): ``mmexec validate --config`` checks each is inside the map, free for the robot's
 footprint and reachable from ``home`` (:func:`base_poses`).
@@ -57,7 +59,7 @@ __all__ = [
 ]
 
 #: ``setting`` metadata keys
-_BOUNDS, _UNIT, _DOC, _POSE = "mmexec.bounds", "mmexec.unit", "mmexec.doc", "mmexec.base_pose"
+_BOUNDS, _UNIT, _DOC, _POSE, _REF = "mmexec.bounds", "mmexec.unit", "mmexec.doc", "mmexec.base_pose", "mmexec.refers_to"
 
 
 @dataclass(frozen=True)
@@ -98,6 +100,7 @@ def setting(
     lt: float | None = None,
     le: float | None = None,
     base_pose: bool = False,
+    refers_to: str | None = None,
     doc: str = "",
 ) -> Any:
     """A dataclass field of a profile section with its ``unit``, range and ``doc``.
@@ -105,8 +108,9 @@ def setting(
     No ``default``: the key is required. A list default is copied for each instance. A
     range applies to a number or to every number of a list (``item_size > 0``).
     ``base_pose``: the value is a base pose ``[x, y, theta]`` in ``map`` [m, m, rad], or
-    a list of them."""
-    metadata = {_UNIT: unit, _DOC: doc, _POSE: base_pose}
+    a list of them. ``refers_to``: the value (a string; None means unused) is a key of
+    the profile section of that name."""
+    metadata = {_UNIT: unit, _DOC: doc, _POSE: base_pose, _REF: refers_to}
     if any(b is not None for b in (gt, ge, lt, le)):
         metadata[_BOUNDS] = Bounds(gt, ge, lt, le)
     if isinstance(default, list):
@@ -190,6 +194,10 @@ class ProfileSchema:
             out = self.bind_section(key, raw, value_marks.get(key, mark), problems, path)
             if out is not None:
                 bound[key] = out
+        for key, raw in profile.items():
+            if key in self._sections:
+                _check_refs(self._sections[key].schema, bound.get(key), raw, value_marks.get(key, mark),
+                            f"{path}.{key}", profile, problems)
         return bound, problems
 
     def _nested_hint(self, key: str) -> str:
@@ -273,6 +281,32 @@ def _check_bounds(tp: Any, raw: Any, mark: Mark, path: str, problems: Problems) 
                 if _is_number(v) and not bounds.admits(float(v)):
                     problems.add(m, f"{where}: expected {bounds.describe()}{unit}, got {v!r}")
         _check_bounds(ftype, value, vmark, sub, problems)
+
+
+def _check_refs(tp: Any, bound: Any, raw: Any, mark: Mark, path: str, profile: Mapping[str, Any],
+                problems: Problems) -> None:
+    """Problems of the :func:`setting` ``refers_to`` names of a section: each must be a key
+    of the profile section it refers to. ``bound`` is the bound section, whose defaults are
+    then checked too (located at the nearest mapping written in the file); None when it
+    did not bind, and then only the names written in ``raw`` are checked."""
+    tp = _unwrap(tp)
+    if not (dataclasses.is_dataclass(tp) and isinstance(tp, type)):
+        return
+    hints = typing.get_type_hints(tp)
+    for f in dataclasses.fields(tp):
+        written = isinstance(raw, Mapping) and f.name in raw
+        value = getattr(bound, f.name) if bound is not None else raw[f.name] if written else None
+        vmark = _value_mark(raw, f.name, mark) if written else mark
+        target = f.metadata.get(_REF)
+        if target is not None and isinstance(value, str):
+            keys = profile.get(target)
+            names = sorted(keys) if isinstance(keys, Mapping) else []
+            if value not in names:
+                where = "" if written else " (the default)"
+                problems.add(vmark, f"{path}.{f.name}: {value!r}{where} is not one of profile.{target}"
+                             + (did_you_mean(value, names) or f" (known: {', '.join(names) or 'none'})"))
+        _check_refs(hints[f.name], value if bound is not None else None, raw.get(f.name) if written else None,
+                    vmark, f"{path}.{f.name}", profile, problems)
 
 
 def _as_pose(raw: Any) -> Pose2D | None:

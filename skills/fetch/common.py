@@ -107,10 +107,11 @@ class ArmSettings:
     attempts: int = setting(3, ge=1, doc="planning attempts")
     velocity_scale: float = setting(0.8, gt=0, le=1, doc="fraction of the joint velocity limits")
     acceleration_scale: float = setting(0.8, gt=0, le=1, doc="fraction of the joint acceleration limits")
-    stow: str = setting("sleep", doc="named pose to stow the arm in while driving")
-    carry: str = setting("sleep", doc="named pose to carry an item in")
-    look: str | None = setting(None, doc="named pose to look with an arm-mounted camera (None: camera not on the arm)")
-    reach: str | None = setting(None, doc=(
+    stow: str = setting("sleep", refers_to="named_poses", doc="named pose to stow the arm in while driving")
+    carry: str = setting("sleep", refers_to="named_poses", doc="named pose to carry an item in")
+    look: str | None = setting(None, refers_to="named_poses",
+                               doc="named pose to look with an arm-mounted camera (None: camera not on the arm)")
+    reach: str | None = setting(None, refers_to="named_poses", doc=(
         "posture that seeds IK for pick and place poses, its yaw joint turned towards the target "
         "(None: the current posture only)"))
     plan_slice: float = setting(0.015, unit="wall s", ge=0, le=0.1, doc="longest a tick waits for the planner on a wall clock")

@@ -37,10 +37,11 @@ def test_real_robot_capabilities_come_from_the_plan_not_from_devices(repo_root: 
 
     monkeypatch.setattr(robot_backend, "build", no_build)
     monkeypatch.setattr(config_mod, "build_robot", no_build)
-    caps = cli.binding_capabilities(load_config(repo_root / "config/locobot.yaml"))
-    assert caps == {"base", "arm", "gripper", "camera"}
-    caps = cli.binding_capabilities(load_config(repo_root / "config/ur5e.yaml"))
-    assert caps == {"base", "arm", "gripper", "camera"}
+    for config in ("config/locobot.yaml", "config/ur5e.yaml"):
+        loaded = load_config(repo_root / config)
+        caps = cli.binding_capabilities(loaded)
+        assert caps >= {"base", "arm", "gripper", "camera"}, config
+        assert caps == {line.split(":")[0] for line in robot_backend.check(loaded.section())}, config
 
 
 def test_mock_capabilities_follow_its_section(tmp_path: Path) -> None:
@@ -222,3 +223,16 @@ def test_run_options_a_backend_cannot_honour_are_errors(run_cli, repo_root: Path
                                     + ("the simulator window" if flag[0] == "--gui" else "a video of the simulation")
                                     + "; only backend 'sim' can): run without it or use a sim config"]
     assert not (tmp_path / "video.mp4").exists()
+
+
+def test_a_named_pose_typo_is_found_before_the_robot_drives(run_cli, repo_root: Path, tmp_path: Path) -> None:
+    """fetch.arm.stow names a pose of profile.named_poses: a typo there used to pass validate
+    and fail the first arm move of the run, after the robot had driven to the shelf."""
+    text = (repo_root / "config/locobot_sim.yaml").read_text()
+    stow = "      stow: tuck"
+    line = next(i for i, ln in enumerate(text.splitlines(), 1) if ln.startswith(stow))
+    cfg = tmp_path / "sim.yaml"
+    cfg.write_text(text.replace(stow, "      stow: tuk "))
+    res = run_cli("validate", repo_root / MISSION, "--config", cfg)
+    assert (res.rc, res.err.splitlines()) == (2, [
+        f"{cfg}:{line}:13: profile.fetch.arm.stow: 'tuk' is not one of profile.named_poses; did you mean 'tuck'?"])

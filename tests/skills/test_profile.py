@@ -96,3 +96,30 @@ def test_a_profile_set_up_in_code_fails_the_skill_with_the_range_problem(mock_ro
     mock_robot.profile["fetch"] = {"depot": {"base": [0, 0, 0], "place": [0, 0, 0.3]}, "detect_frames": 0}
     with pytest.raises(SkillFailure, match=r"profile.fetch.detect_frames: expected >= 1, got 0"):
         fetch_profile(SkillContext.for_robot(mock_robot))
+
+
+def test_named_pose_roles_must_name_a_named_pose_defaults_included() -> None:
+    raw = _profile("profile:\n  named_poses: {tuck: [0, 0], carry: [0, 1]}\n"
+                   "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
+                   "    arm: {stow: tuk, carry: carry, look: gaze}\n")
+    _bound, problems = PROFILE.check(raw, raw.mark)
+    assert sorted(map(str, problems)) == [
+        "c.yaml:5:17: profile.fetch.arm.stow: 'tuk' is not one of profile.named_poses; did you mean 'tuck'?",
+        "c.yaml:5:42: profile.fetch.arm.look: 'gaze' is not one of profile.named_poses (known: carry, tuck)",
+    ]
+    raw = _profile("profile:\n  named_poses: {tuck: [0, 0]}\n"
+                   "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n    arm: {stow: tuck}\n")
+    _bound, problems = PROFILE.check(raw, raw.mark)
+    assert list(map(str, problems)) == [
+        "c.yaml:5:10: profile.fetch.arm.carry: 'sleep' (the default) is not one of profile.named_poses (known: tuck)"]
+
+
+def test_a_named_pose_typo_is_reported_with_the_other_problems_of_its_section() -> None:
+    raw = _profile("profile:\n  named_poses: {tuck: [0, 0]}\n"
+                   "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
+                   "    detect_frames: 0\n    arm: {stow: tuk}\n")
+    _bound, problems = PROFILE.check(raw, raw.mark)
+    assert sorted(map(str, problems)) == [
+        "c.yaml:5:20: profile.fetch.detect_frames: expected >= 1, got 0",
+        "c.yaml:6:17: profile.fetch.arm.stow: 'tuk' is not one of profile.named_poses; did you mean 'tuck'?",
+    ]
