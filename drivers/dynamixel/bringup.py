@@ -1,14 +1,32 @@
 """Bring-up commands for a DYNAMIXEL bus: ``mmexec hw ping dynamixel`` and ``mmexec hw fake dynamixel``.
 
-``ping`` pings each requested id (3 attempts each) and prints one line per servo that
-answered (id, model name and number, firmware); it exits 0 when every requested id
-answered, otherwise it prints one line to stderr naming the port and what went wrong
-(no such port, permission denied, port busy, no answer within the deadline, corrupt
-frames, servo fault) and exits 1 -- never a traceback.
+``ping`` pings each requested id (up to ``--attempts`` times until it answers), then
+``--count`` more times, and reads its Hardware Error Status (address 70). It prints one line
+per servo that answered (id, model name and number, firmware, any hardware error or alert)
+and a last line with the link quality of the pings to the servos that answered::
+
+    id 1: XM430-W350 (model 1020), firmware 46
+    ...
+    dynamixel /dev/ttyDXL: link: 99 exchanges with 9 servos, 0 lost, 0 corrupt (0.0 %)
+
+*lost*: no status packet within the reply deadline; *corrupt*: a status packet with a bad
+CRC, cut short, or a servo answering CRC error (the instruction was garbled on the way).
+Exchanges with ids that never answered are not counted: those servos are missing.
+
+Exit status, with at most one line on stderr naming the device, the port and the reason:
+
+* 0: ready; a line ``warning: ...`` when more than 1 % of the exchanges were lost or corrupt.
+* 1: the bus answered but is not fit to run: a requested id missing, a servo in hardware
+  error (Hardware Error Status non-zero, or the alert bit in its status packets: torque is
+  off until a reboot), its Hardware Error Status unreadable, the port lost during the ping;
+  or no useful answer at all (no answer within the deadline, only corrupt frames).
+* 2: bad input (``--ids``, ``--baud``, ``--count`` ...) or the port cannot be opened (no
+  such port, permission denied, busy).
 
 ``run_fake`` starts a :class:`~mmexec.drivers.fakes.dynamixel.FakeDxlBus` with a WX250s
-(``--locobot`` adds pan/tilt; ``--missing IDS`` and ``--hardware-error ID:FAULT`` rehearse
-the faults), prints its port on one line and serves until SIGINT/SIGTERM.
+(``--locobot`` adds pan/tilt; ``--missing IDS``, ``--hardware-error ID:FAULT`` and
+``--drop-every`` / ``--corrupt-every`` rehearse the faults), prints its port on one line and
+serves until SIGINT/SIGTERM.
 """
 
 from __future__ import annotations
@@ -17,8 +35,10 @@ import argparse
 import signal
 import sys
 import threading
+from collections.abc import Callable
+from dataclasses import dataclass
 from types import FrameType
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,
@@ -31,12 +51,23 @@ from mmexec.drivers.dynamixel.bus import (
     PortUnavailable,
     ServoError,
 )
+from mmexec.drivers.dynamixel.codec import StatusResult
 from mmexec.drivers.dynamixel.control_table import MODELS, decode_hardware_error
 
-__all__ = ["add_fake_arguments", "add_ping_arguments", "make_fake", "parse_ids", "ping", "run_fake"]
+__all__ = [
+    "LINK_WARN_RATIO",
+    "add_fake_arguments",
+    "add_ping_arguments",
+    "make_fake",
+    "parse_ids",
+    "ping",
+    "run_fake",
+]
 
 if TYPE_CHECKING:
     from mmexec.drivers.fakes.dynamixel import FakeDxlBus
+
+_T = TypeVar("_T")
 
 DEVICE = "dynamixel"
 
@@ -64,6 +95,12 @@ def parse_ids(text: str) -> list[int]:
     return sorted(ids)
 
 
+#: ping warns when more than this fraction of the exchanges were lost or corrupt
+LINK_WARN_RATIO = 0.01
+_MAX_COUNT = 1000
+HW_ERROR_STATUS = 70  # address of Hardware Error Status (X series)
+
+
 def add_ping_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", required=True, help="serial port of the U2D2, e.g. /dev/ttyDXL")
     parser.add_argument("--baud", type=int, default=1_000_000, help="bit/s (default 1000000)")
@@ -74,89 +111,179 @@ def add_ping_arguments(parser: argparse.ArgumentParser) -> None:
         default=16.0,
         help="adapter latency for reply deadlines [ms] (default 16, the FTDI factory timer)",
     )
-    parser.add_argument("--attempts", type=int, default=3, help="ping attempts per id (default 3)")
+    parser.add_argument(
+        "--attempts", type=int, default=3, help="ping attempts per id until it answers (default 3)"
+    )
+    parser.add_argument(
+        "--count",
+        type=int,
+        default=10,
+        help="further pings per servo that answered, for link quality (default 10)",
+    )
+
+
+@dataclass
+class _Servo:
+    """What the ping learned about one id: its answer, the exchanges with it and how they
+    failed, its alert bit and hardware faults."""
+
+    id: int
+    info: PingInfo | None = None
+    exchanges: int = 0
+    lost: int = 0
+    corrupt: int = 0
+    alert: bool = False
+    faults: tuple[str, ...] = ()
+    unreadable: str = ""  # why Hardware Error Status could not be read
+
+
+def _exchange(
+    servo: _Servo, call: Callable[..., _T], *args: object, counted: bool = True
+) -> _T | None:
+    """One exchange with ``servo``; None when its reply was lost or corrupt (a servo
+    answering CRC error got a corrupt instruction: also corrupt). ``counted`` exchanges
+    make the link quality."""
+    n = int(counted)
+    servo.exchanges += n
+    try:
+        return call(*args)
+    except NoReply:
+        servo.lost += n
+    except CorruptReply:  # TruncatedReply included
+        servo.corrupt += n
+    except ServoError as e:
+        if e.result is not StatusResult.CRC_ERROR:
+            raise
+        servo.corrupt += n
+    return None
+
+
+def _probe(bus: DxlBus, servo: _Servo, attempts: int, count: int) -> None:
+    """Ping until it answers, ``count`` more pings (the link quality), then read Hardware
+    Error Status."""
+    for _ in range(attempts):
+        servo.info = _exchange(servo, bus.ping, servo.id)
+        if servo.info is not None:
+            break
+    if servo.info is None:
+        return
+    servo.alert = servo.info.alert
+    for _ in range(count):
+        info = _exchange(servo, bus.ping, servo.id)
+        servo.alert |= info is not None and info.alert
+    if servo.info.model not in MODELS:
+        return  # no control table known: address 70 may mean something else
+    for _ in range(attempts):  # not link quality: a servo may answer pings only (SRL 0)
+        st = _exchange(servo, bus.read_status, servo.id, HW_ERROR_STATUS, 1, counted=False)
+        if st is None:
+            continue
+        servo.alert |= st.alert
+        if st.result is StatusResult.CRC_ERROR:
+            continue
+        if not st.ok or len(st.data) != 1:
+            servo.unreadable = st.result.text if not st.ok else "wrong length"
+            return
+        servo.faults = decode_hardware_error(st.data[0])
+        servo.unreadable = ""
+        return
+    servo.unreadable = (
+        f"no valid reply to a read in {attempts} attempts (Status Return Level 0, or noise?)"
+    )
+
+
+def _servo_line(servo: _Servo) -> str:
+    assert servo.info is not None
+    info = servo.info
+    model = MODELS[info.model].name if info.model in MODELS else "unknown model"
+    line = f"id {servo.id}: {model} (model {info.model}), firmware {info.firmware}"
+    if servo.faults:
+        line += f", HARDWARE ERROR: {', '.join(servo.faults)}"
+    elif servo.alert:
+        line += ", HARDWARE ALERT (alert bit set in its status packets)"
+    if servo.unreadable:
+        line += f", Hardware Error Status unreadable: {servo.unreadable}"
+    return line
 
 
 def ping(args: argparse.Namespace) -> int:
+    """Ping, check fitness and link quality; the exit status of the module docstring."""
     port = args.port
     try:
         ids = parse_ids(args.ids)
         cfg = BusConfig(port, int(args.baud), float(args.latency_ms) / 1000.0)
+        if not 1 <= args.attempts <= _MAX_COUNT:
+            raise ValueError(f"--attempts must be in 1..{_MAX_COUNT}, got {args.attempts}")
+        if not 0 <= args.count <= _MAX_COUNT:
+            raise ValueError(f"--count must be in 0..{_MAX_COUNT}, got {args.count}")
     except ValueError as e:
         print(f"{DEVICE} {port}: {e}", file=sys.stderr)
         return 2
     bus = DxlBus(cfg)
-    found: dict[int, PingInfo] = {}
-    missing: list[int] = []
-    corrupt: list[int] = []
-    faulted: list[str] = []
+    servos = [_Servo(i) for i in ids]
     try:
         bus.open()
-        for dxl_id in ids:
-            for _ in range(max(1, int(args.attempts))):
-                try:
-                    found[dxl_id] = bus.ping(dxl_id)
-                    break
-                except CorruptReply:
-                    if dxl_id not in corrupt:
-                        corrupt.append(dxl_id)
-                except NoReply:
-                    continue
-            if dxl_id not in found:
-                missing.append(dxl_id)
-                continue
-            info = found[dxl_id]
-            model = MODELS[info.model].name if info.model in MODELS else "unknown model"
-            line = f"id {dxl_id}: {model} (model {info.model}), firmware {info.firmware}"
-            try:
-                faults = (
-                    decode_hardware_error(bus.read(dxl_id, 70, 1)[0])
-                    if info.model in MODELS
-                    else ()
-                )
-            except (NoReply, CorruptReply, ServoError):
-                faults = ()
-            if faults:
-                line += f", HARDWARE ERROR: {', '.join(faults)}"
-                faulted.append(f"id {dxl_id} {'+'.join(faults)}")
-            print(line)
+        for servo in servos:
+            _probe(bus, servo, args.attempts, args.count)
+            if servo.info is not None:
+                print(_servo_line(servo))
     except PortUnavailable as e:
         print(f"{DEVICE} {port}: {e.detail}", file=sys.stderr)
-        return 1
+        return 2
     except LinkLost as e:
-        print(f"{DEVICE} {port}: {e.detail}", file=sys.stderr)
+        print(f"{DEVICE} {port}: {e.detail} during the ping", file=sys.stderr)
         return 1
     except DynamixelError as e:
         print(f"{DEVICE} {port}: {e}", file=sys.stderr)
         return 1
     finally:
         bus.close()
+    return _judge(args, servos)
+
+
+def _judge(args: argparse.Namespace, servos: list[_Servo]) -> int:
+    """Print the link line and at most one line on stderr; the exit status."""
+    where = f"{DEVICE} {args.port}"
+    found = [s for s in servos if s.info is not None]
+    corrupt_ids = [s.id for s in servos if s.corrupt]
     if not found:
         why = (
             "corrupt frames (wrong baud rate or noise?)"
-            if corrupt
+            if corrupt_ids
             else "no answer within the deadline"
         )
-        print(
-            f"{DEVICE} {port}: {why} from any of ids {args.ids} at {args.baud} baud",
-            file=sys.stderr,
-        )
+        print(f"{where}: {why} from any of ids {args.ids} at {args.baud} baud", file=sys.stderr)
         return 1
+    exchanges = sum(s.exchanges for s in found)
+    lost, corrupt = sum(s.lost for s in found), sum(s.corrupt for s in found)
+    ratio = (lost + corrupt) / exchanges
+    print(
+        f"{where}: link: {exchanges} exchanges with {len(found)} servos, {lost} lost, "
+        f"{corrupt} corrupt ({100 * ratio:.1f} %)"
+    )
+    note = (
+        f"link quality {100 * ratio:.1f} % lost or corrupt (above {100 * LINK_WARN_RATIO:g} %: "
+        "check the cables and connectors, the adapter's latency timer and the baud rate)"
+    )
+    also = f"; also {note}" if ratio > LINK_WARN_RATIO else ""
+    missing = [s.id for s in servos if s.info is None]
+    faulted = [f"id {s.id} {'+'.join(s.faults) or 'alert'}" for s in found if s.faults or s.alert]
+    unreadable = [f"id {s.id} ({s.unreadable})" for s in found if s.unreadable]
     if missing:
-        extra = f" (corrupt frames from {', '.join(map(str, corrupt))})" if corrupt else ""
-        print(
-            f"{DEVICE} {port}: no answer within the deadline from ids {', '.join(map(str, missing))}{extra}",
-            file=sys.stderr,
+        extra = f" (corrupt frames from {', '.join(map(str, corrupt_ids))})" if corrupt_ids else ""
+        problem = f"no answer within the deadline from ids {', '.join(map(str, missing))}{extra}"
+    elif faulted:
+        problem = (
+            f"servo fault: {', '.join(faulted)} (torque is off: find the cause, then reboot "
+            "the servo, e.g. power-cycle or WX250s.reboot())"
         )
-        return 1
-    if faulted:
-        print(
-            f"{DEVICE} {port}: servo fault: {', '.join(faulted)} (torque is off: find the cause, "
-            "then reboot the servo, e.g. power-cycle or WX250s.reboot())",
-            file=sys.stderr,
-        )
-        return 1
-    return 0
+    elif unreadable:
+        problem = f"Hardware Error Status unreadable from {', '.join(unreadable)}"
+    else:
+        if also:
+            print(f"{where}: warning: {note}", file=sys.stderr)
+        return 0
+    print(f"{where}: {problem}{also}", file=sys.stderr)
+    return 1
 
 
 def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
@@ -176,6 +303,14 @@ def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
         "--hardware-error", action="append", default=[], metavar="ID:FAULT[+FAULT]",
         help="start a servo in Hardware Error, e.g. 4:overload (overload, overheating, "
         "input_voltage, motor_encoder, electrical_shock); repeatable",
+    )
+    parser.add_argument(
+        "--drop-every", type=int, default=0, metavar="N",
+        help="lose every N-th status packet (a noisy bus; default 0: none)",
+    )
+    parser.add_argument(
+        "--corrupt-every", type=int, default=0, metavar="N",
+        help="send every N-th status packet with a bad CRC (default 0: none)",
     )
 
 
@@ -198,6 +333,11 @@ def make_fake(args: argparse.Namespace) -> FakeDxlBus:
             fake.inject_hardware_error(int(sid), *names.split("+"))
         except KeyError as e:
             raise ValueError(f"--hardware-error: {e.args[0]}") from None
+    for flag in ("drop_every", "corrupt_every"):
+        n = getattr(args, flag)
+        if n < 0:
+            raise ValueError(f"--{flag.replace('_', '-')} must be >= 0, got {n}")
+        setattr(fake, flag, n)
     return fake
 
 

@@ -183,11 +183,13 @@ class BusConfig:
 
 @dataclass(frozen=True)
 class PingInfo:
-    """What a servo reports to Ping: ``model`` number and ``firmware`` version."""
+    """What a servo reports to Ping: ``model`` number and ``firmware`` version; ``alert``:
+    the hardware alert bit was set in its status (read Hardware Error Status for why)."""
 
     id: int
     model: int
     firmware: int
+    alert: bool = False
 
 
 @dataclass
@@ -347,7 +349,7 @@ class DxlBus:
             raise CorruptReply(
                 self.config.port, f"ping reply from servo id {dxl_id} too short", dxl_id
             )
-        return PingInfo(dxl_id, st.data[0] | (st.data[1] << 8), st.data[2])
+        return PingInfo(dxl_id, st.data[0] | (st.data[1] << 8), st.data[2], st.alert)
 
     def broadcast_ping(self, max_ids: int = 253) -> list[PingInfo]:
         """Broadcast ping: collect every answer until the deadline for ``max_ids`` replies."""
@@ -369,11 +371,9 @@ class DxlBus:
                             and item.is_status
                             and len(item.params) >= 4
                         ):
-                            found.append(
-                                PingInfo(
-                                    item.id, item.params[1] | (item.params[2] << 8), item.params[3]
-                                )
-                            )
+                            p = item.params
+                            alert = bool(p[0] & codec.ALERT_BIT)
+                            found.append(PingInfo(item.id, p[1] | (p[2] << 8), p[3], alert))
             except LinkError as e:
                 raise LinkLost(self.config.port, f"link lost: {e.detail}") from e
         return sorted(found, key=lambda p: p.id)

@@ -27,7 +27,8 @@ Fault switches (attributes or methods on :class:`FakeDxlBus`):
   the alert bit in every status until a Reboot;
 * ``servo.present = False``: a missing servo (never answers);
 * ``corrupt_replies`` / ``truncate_replies``: how many of the next status packets get a
-  wrong CRC / are cut short;
+  wrong CRC / are cut short; ``corrupt_every`` / ``drop_every``: every n-th status packet
+  gets a wrong CRC / is never sent (a noisy bus, for link-quality tests; 0 = off);
 * ``corrupt_instructions``: how many of the next instructions arrive corrupted; the servo
   answers with error 3 if ``crc_error_reply`` is True, else stays silent (which one real
   X-series firmware does is unconfirmed, so the driver is tested both ways);
@@ -417,6 +418,9 @@ class FakeDxlBus(PtyDevice):
         self.corrupt_instructions = 0
         self.corrupt_replies = 0
         self.truncate_replies = 0
+        self.corrupt_every = 0
+        self.drop_every = 0
+        self.status_packets = 0  # status packets the servos had to send (every-n-th switches)
         self.reboot_time = 0.0  # s a servo stays silent while restarting after Reboot
         self.goal_writes = 0  # packets that wrote Goal Position / Goal PWM to a servo
         self.instructions: list[tuple[int, int]] = []  # (id, instruction) received, bounded
@@ -476,8 +480,14 @@ class FakeDxlBus(PtyDevice):
         if servo.alert:
             error |= _ALERT
         frame = codec.encode_status(servo.id, error, data)
-        if self.corrupt_replies > 0:
-            self.corrupt_replies -= 1
+        self.status_packets += 1
+        n = self.status_packets
+        noise = self.corrupt_every > 0 and n % self.corrupt_every == 0
+        if self.drop_every > 0 and n % self.drop_every == 0:
+            frame = b""  # lost on the bus
+        elif noise or self.corrupt_replies > 0:
+            if not noise:
+                self.corrupt_replies -= 1
             frame = frame[:-1] + bytes((frame[-1] ^ 0x5A,))
         elif self.truncate_replies > 0:
             self.truncate_replies -= 1
@@ -486,6 +496,8 @@ class FakeDxlBus(PtyDevice):
 
     def _send_status(self, status: tuple[bytes, float]) -> None:
         frame, delay = status
+        if not frame:
+            return
         if self.honour_return_delay and delay > 0:
             time.sleep(delay)
         self.send(frame)

@@ -78,7 +78,7 @@ def test_dynamixel(capsys: pytest.CaptureFixture[str]) -> None:
         assert rc == 1 and err.startswith(f"dynamixel {port}: servo fault: id 4 overload (torque is off")
     with fake_process("dynamixel") as port:
         rc, out, err = ping(capsys, "dynamixel", "--port", port, "--latency-ms", "20")
-        assert rc == 0 and len(out.splitlines()) == 9 and err == ""
+        assert rc == 0 and len(out.splitlines()) == 9 + 1 and err == ""  # servos + link line
 
 
 def test_dynamixel_bad_fault_switch_is_one_line() -> None:
