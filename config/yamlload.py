@@ -3,12 +3,17 @@
 Every user-facing YAML file (missions, configs, worlds) goes through :func:`load_yaml`:
 
 * safe loading only (no ``!!python/*`` tags: an unknown tag is an error);
-* hostile input rejected quickly and clearly: files over :data:`MAX_BYTES`, invalid
-  UTF-8, NUL or other control bytes, nesting deeper than :data:`MAX_DEPTH`, more than
-  :data:`MAX_ALIASES` aliases (alias bombs), more than :data:`MAX_NODES` nodes;
+* hostile input rejected quickly and clearly: anything but a regular file (a FIFO,
+  ``/dev/zero``, a directory, a symlink loop: see :func:`read_file`), files over
+  :data:`MAX_BYTES`, invalid UTF-8, NUL or other control bytes, nesting deeper than
+  :data:`MAX_DEPTH`, more than :data:`MAX_ALIASES` aliases (alias bombs), more than
+  :data:`MAX_NODES` nodes;
 * mappings load as :class:`YDict` and sequences as :class:`YList`, plain ``dict`` /
   ``list`` subclasses that remember where each key and item is, so later stages report
-  ``FILE:LINE:COL: path.to.key: message`` (1-based line and column).
+  ``FILE:LINE:COL: path.to.key: message`` (1-based line and column);
+* :func:`bind` refuses non-finite numbers (``.nan``, ``.inf``) in every ``float`` field
+  and anywhere inside untyped (``Any``) data; a field that may be infinite says so with
+  :data:`MaybeInfinite` (``.inf`` / ``-.inf`` then bind; NaN never does).
 
 Problems are collected in a :class:`Problems` list and raised together as
 :class:`InputError`, whose ``str()`` is one line per problem.
@@ -19,13 +24,17 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import enum
+import errno
 import functools
+import math
+import os
+import stat
 import types
 import typing
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
 
@@ -34,23 +43,42 @@ __all__ = [
     "MAX_BYTES",
     "MAX_DEPTH",
     "MAX_NODES",
+    "MAY_BE_INFINITE",
     "InputError",
     "Mark",
+    "MaybeInfinite",
     "Problem",
     "Problems",
     "YDict",
     "YList",
     "bind",
     "did_you_mean",
+    "is_within",
     "load_yaml",
     "load_yaml_text",
     "mark_of",
+    "read_file",
+    "refuse_nonfinite",
 ]
 
 MAX_BYTES = 4 * 1024 * 1024
 MAX_DEPTH = 64
 MAX_ALIASES = 256
 MAX_NODES = 200_000
+
+
+class _MayBeInfinite:
+    """Marker in ``Annotated[float, MAY_BE_INFINITE]``: the field accepts +-infinity."""
+
+    def __repr__(self) -> str:
+        return "MAY_BE_INFINITE"
+
+
+#: Metadata marking a float field that may be infinite (see :data:`MaybeInfinite`).
+MAY_BE_INFINITE = _MayBeInfinite()
+#: A float field that accepts ``.inf`` and ``-.inf`` (never ``.nan``); a plain ``float``
+#: field refuses every non-finite number.
+MaybeInfinite = Annotated[float, MAY_BE_INFINITE]
 
 
 class Mark(typing.NamedTuple):
@@ -158,24 +186,89 @@ def _utf8_error_mark(file: str, data: bytes, pos: int) -> Mark:
     return Mark(file, line, col)
 
 
-def load_yaml(path: str | Path) -> Any:
-    """Load one YAML document from ``path`` (see module doc). Raises InputError."""
-    p = Path(path)
-    name = str(path)
+_FILE_KINDS: tuple[tuple[Any, str], ...] = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def _not_regular(mode: int, expected: str) -> str | None:
+    """Why a file of ``mode`` cannot be read as ``expected``, or None for a regular file."""
+    if stat.S_ISREG(mode):
+        return None
+    kind = next((name for test, name in _FILE_KINDS if test(mode)), "not a regular file")
+    return f"is {kind}, expected {expected}"
+
+
+def _os_reason(e: OSError) -> str:
+    """A one-line reason for an OSError met opening or reading a file."""
+    reasons = {
+        errno.ENOENT: "no such file",
+        errno.ENOTDIR: "no such file (a folder in the path is a file)",
+        errno.EACCES: "permission denied",
+        errno.EPERM: "permission denied",
+        errno.ELOOP: "too many levels of symbolic links (a symlink loop?)",
+        errno.ENAMETOOLONG: "file name too long",
+    }
+    return reasons.get(e.errno or 0) or f"cannot read: {e.strerror or e}"
+
+
+def read_file(path: str | Path, *, limit: int = MAX_BYTES, expected: str = "a YAML file") -> bytes:
+    """The bytes of the regular file at ``path``, which must be at most ``limit`` bytes.
+
+    Anything else is an :class:`InputError` at ``path:1:1``, raised at once and without
+    reading: a missing file, a directory, a FIFO (it is never waited on), a device such
+    as ``/dev/zero``, a socket, a symlink loop, an unreadable file, or a file larger than
+    ``limit`` (a sparse 3 GB file is refused from its size, and a file that grows while
+    it is read stops being read one byte past ``limit``). ``expected`` names what the
+    file should be, for the message ("a YAML file", "an event log").
+    """
+    where = Mark(str(path), 1, 1)
     try:
-        size = p.stat().st_size
-        if size > MAX_BYTES:
-            raise InputError.at(Mark(name, 1, 1), f"file is {size} bytes, larger than the {MAX_BYTES} byte limit")
-        data = p.read_bytes()
-    except FileNotFoundError:
-        raise InputError.at(Mark(name, 1, 1), "no such file") from None
-    except IsADirectoryError:
-        raise InputError.at(Mark(name, 1, 1), "is a directory, expected a YAML file") from None
-    except PermissionError:
-        raise InputError.at(Mark(name, 1, 1), "permission denied") from None
+        st = os.stat(path)  # no open() yet: opening a device or a serial port has side effects
+        why = _not_regular(st.st_mode, expected)
+        if why is not None:
+            raise InputError.at(where, why)
+        flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOCTTY", 0)
+        fd = os.open(path, flags)
     except OSError as e:
-        raise InputError.at(Mark(name, 1, 1), f"cannot read: {e.strerror or e}") from None
-    return load_yaml_bytes(data, name)
+        raise InputError.at(where, _os_reason(e)) from None
+    try:
+        st = os.fstat(fd)  # what was opened, which may not be what was stat'ed a moment ago
+        why = _not_regular(st.st_mode, expected)
+        if why is not None:
+            raise InputError.at(where, why)
+        if st.st_size > limit:
+            raise InputError.at(where, f"file is {st.st_size} bytes, larger than the {limit} byte limit")
+        chunks: list[bytes] = []
+        total = 0
+        while total <= limit:
+            chunk = os.read(fd, min(1 << 20, limit + 1 - total))
+            if not chunk:
+                return b"".join(chunks)
+            chunks.append(chunk)
+            total += len(chunk)
+        raise InputError.at(where, f"file grew past the {limit} byte limit while it was read")
+    except OSError as e:
+        raise InputError.at(where, _os_reason(e)) from None
+    finally:
+        os.close(fd)
+
+
+def is_within(path: str | Path, roots: Iterable[str | Path]) -> bool:
+    """Whether ``path``, with every symlink resolved, lies inside one of ``roots`` (also
+    resolved). Never opens or reads ``path``; a symlink loop resolves to itself."""
+    real = Path(os.path.realpath(path))
+    return any(real.is_relative_to(os.path.realpath(r)) for r in roots)
+
+
+def load_yaml(path: str | Path) -> Any:
+    """Load one YAML document from the regular file ``path`` (see module doc and
+    :func:`read_file`). Raises InputError."""
+    return load_yaml_bytes(read_file(path), str(path))
 
 
 def load_yaml_bytes(data: bytes, name: str = "<string>") -> Any:
@@ -388,6 +481,9 @@ def _scalar_event(ev: yaml.ScalarEvent, mark: Mark, ctor: _Constructor, problems
 
 def _type_name(tp: Any) -> str:
     origin = typing.get_origin(tp)
+    if origin is Annotated:
+        base, *meta = typing.get_args(tp)
+        return _type_name(base) + (" or .inf" if MAY_BE_INFINITE in meta else "")
     if origin in (typing.Union, types.UnionType):
         return " or ".join(_type_name(a) for a in typing.get_args(tp) if a is not type(None))
     if origin is typing.Literal:
@@ -414,7 +510,13 @@ def bind(tp: Any, value: Any, mark: Mark, path: str, problems: Problems) -> Any:
     where = f"{path}: " if path else ""
     origin = typing.get_origin(tp)
     if tp is Any:
+        refuse_nonfinite(value, mark, path, problems)
         return value
+    if origin is Annotated:
+        base, *meta = typing.get_args(tp)
+        if base is float:
+            return _bind_float(value, mark, where, problems, allow_inf=MAY_BE_INFINITE in meta)
+        return bind(base, value, mark, path, problems)
     if origin in (typing.Union, types.UnionType):
         args = typing.get_args(tp)
         if value is None and type(None) in args:
@@ -472,10 +574,7 @@ def bind(tp: Any, value: Any, mark: Mark, path: str, problems: Problems) -> Any:
         vm = getattr(value, "value_marks", {})
         return {k: bind(vt, v, vm.get(k, mark), f"{path}.{k}" if path else str(k), problems) for k, v in value.items()}
     if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            problems.add(mark, f"{where}expected a number, got {value!r}")
-            return None
-        return float(value)
+        return _bind_float(value, mark, where, problems, allow_inf=False)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             problems.add(mark, f"{where}expected an integer, got {value!r}")
@@ -497,6 +596,54 @@ def bind(tp: Any, value: Any, mark: Mark, path: str, problems: Problems) -> Any:
     return value
 
 
+def _yaml_number(x: float) -> str:
+    """``x`` as YAML spells it when it is not finite (``.nan``, ``.inf``, ``-.inf``)."""
+    if math.isnan(x):
+        return ".nan"
+    if math.isinf(x):
+        return ".inf" if x > 0 else "-.inf"
+    return repr(x)
+
+
+def _bind_float(value: Any, mark: Mark, where: str, problems: Problems, *, allow_inf: bool) -> float | None:
+    """A finite float from an int or float (``allow_inf``: +-infinity too; NaN never)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        problems.add(mark, f"{where}expected a number, got {value!r}")
+        return None
+    try:
+        x = float(value)
+    except OverflowError:  # an integer with hundreds of digits
+        problems.add(mark, f"{where}expected a finite number, got an integer too large for a float")
+        return None
+    if math.isnan(x) or (math.isinf(x) and not allow_inf):
+        problems.add(mark, f"{where}expected a finite number, got {_yaml_number(x)}")
+        return None
+    return x
+
+
+def refuse_nonfinite(value: Any, mark: Mark, path: str, problems: Problems) -> None:
+    """Record a problem at each NaN or infinity inside untyped loaded data (a free-form
+    profile, a backend section bound later by its builder): nothing declares that such
+    data may be infinite. Iterative; a value shared through YAML aliases is one problem."""
+    stack: list[tuple[Any, Mark, str]] = [(value, mark, path)]
+    seen: set[int] = set()
+    while stack:
+        v, m, p = stack.pop()
+        if isinstance(v, float):
+            if not math.isfinite(v) and all(q.mark != m for q in problems):  # once per place in the file
+                problems.add(m, f"{p + ': ' if p else ''}expected a finite number, got {_yaml_number(v)}")
+            continue
+        if not isinstance(v, (dict, list)) or id(v) in seen:
+            continue
+        seen.add(id(v))
+        if isinstance(v, dict):
+            vm = getattr(v, "value_marks", {})
+            stack.extend((x, vm.get(k, m), f"{p}.{k}" if p else str(k)) for k, x in v.items())
+        else:
+            im = getattr(v, "item_marks", [])
+            stack.extend((x, im[i] if i < len(im) else m, f"{p}[{i}]") for i, x in enumerate(v))
+
+
 def _bind_dataclass(tp: type, value: Any, mark: Mark, path: str, problems: Problems) -> Any:
     where = f"{path}: " if path else ""
     if value is None:
@@ -505,7 +652,7 @@ def _bind_dataclass(tp: type, value: Any, mark: Mark, path: str, problems: Probl
     if not isinstance(value, Mapping):
         problems.add(mark, f"{where}expected a mapping, got {value!r}")
         return None
-    hints = typing.get_type_hints(tp)
+    hints = typing.get_type_hints(tp, include_extras=True)
     fields = {f.name: f for f in dataclasses.fields(tp) if f.init}
     km = getattr(value, "key_marks", {})
     vm = getattr(value, "value_marks", {})

@@ -34,6 +34,7 @@ from typing import Any, NoReturn
 from mmexec.config.brokenpipe import detach_stdout
 from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
 from mmexec.executive.runner import ArgMark, BackendStartError
+from mmexec.executive.textsafe import printable
 
 __all__ = ["main"]
 
@@ -309,11 +310,11 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from mmexec.executive.compiler import load_mission
 
     loaded = _load_for_mission(args.config, check_profile=False)  # the binding check reports it with the rest
-    mission = load_mission(args.mission)
+    mission = load_mission(args.mission, roots=loaded.roots if loaded is not None else ())
     if loaded is not None:
         _check_binding(mission, loaded)
-    print(f"{args.mission}: ok ({mission.node_count} nodes"
-          + (f", binds to backend {loaded.backend!r}" if loaded is not None else "") + ")")
+    print(printable(f"{args.mission}: ok ({mission.node_count} nodes"
+                    + (f", binds to backend {loaded.backend!r}" if loaded is not None else "") + ")"))
     return EXIT_OK
 
 
@@ -330,10 +331,10 @@ def _cmd_show(args: argparse.Namespace) -> int:
         raise UsageError("mmexec show: tree display is not available in this installation "
                          "(module mmexec.executive.display not found)") from None
 
-    _load_for_mission(args.config)
-    mission = load_mission(args.mission)
+    loaded = _load_for_mission(args.config)
+    mission = load_mission(args.mission, roots=loaded.roots if loaded is not None else ())
     tree = mission.display_tree()
-    print(display.render_text(tree))
+    print(printable(display.render_text(tree), multiline=True))
     for path, writer in ((args.dot, display.write_dot), (args.svg, display.write_svg)):
         if path is None:
             continue
@@ -343,6 +344,34 @@ def _cmd_show(args: argparse.Namespace) -> int:
             raise InputError.at(Mark(str(path), 1, 1), f"cannot write: {e.strerror or e}") from None
         print(f"wrote {path}")
     return EXIT_OK
+
+
+#: ``--seed`` values: what numpy and pybullet accept as a seed (an unsigned 32-bit integer).
+SEED_RANGE = (0, 2**32 - 1)
+
+
+def _check_run_flags(args: argparse.Namespace) -> None:
+    """InputError, one line per bad flag, for a ``--seed`` outside :data:`SEED_RANGE`, a
+    ``--rate`` outside the config's tick-rate range or a ``--request-timeout`` that is not
+    finite, positive and within a mission's longest timeout (NaN and inf included)."""
+    import math
+
+    from mmexec.executive.config import MAX_RATE_HZ, MIN_RATE_HZ
+    from mmexec.executive.schema import MAX_SECONDS
+
+    problems: list[Problem] = []
+    lo, hi = SEED_RANGE
+    if args.seed is not None and not lo <= args.seed <= hi:
+        problems.append(Problem(ArgMark("--seed", 0, 0), f"expected an integer in {lo}..{hi}, got {args.seed}"))
+    if args.rate is not None and not (math.isfinite(args.rate) and MIN_RATE_HZ <= args.rate <= MAX_RATE_HZ):
+        problems.append(Problem(ArgMark("--rate", 0, 0),
+                                f"expected a tick rate in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {args.rate:g}"))
+    t = args.request_timeout
+    if t is not None and not (math.isfinite(t) and 0 < t <= MAX_SECONDS):
+        problems.append(Problem(ArgMark("--request-timeout", 0, 0),
+                                f"expected clock seconds > 0 and at most {MAX_SECONDS:g}, got {t:g}"))
+    if problems:
+        raise InputError(problems)
 
 
 def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namespace | None,
@@ -360,8 +389,7 @@ def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namesp
         opts.watch, opts.gui, opts.record = args.watch, args.gui, args.record
         opts.request_timeout = args.request_timeout
         opts.recovery_enabled = not getattr(args, "no_recovery", False)
-        if opts.request_timeout is not None and opts.request_timeout <= 0:
-            raise InputError.at(ArgMark("--request-timeout", 1, 1), "expected seconds > 0")
+        _check_run_flags(args)
     _preload_pybullet_quietly()
     runner = Runner(opts)
     runner.prepare()
@@ -424,7 +452,7 @@ def _cmd_demo(args: argparse.Namespace, argv: Sequence[str]) -> int:
         _CURRENT_LOG[0] = log_path
         code = runner.run()
     print()
-    print(demo_table(runner.results))
+    print(printable(demo_table(runner.results), multiline=True))
     print(f"event log: {log_path}")
     if video is not None:
         print(f"video: {video}")
@@ -461,7 +489,7 @@ def _cmd_log(args: argparse.Namespace) -> int:
     except LogFormatError as e:
         raise UsageError(str(e)) from None
     if args.log_command == "summary":
-        print(summary(records))
+        print(printable(summary(records), multiline=True))  # a log holds user text (report messages, reasons)
         return EXIT_OK
     try:
         frames = replay_frames(records, request=args.request)
@@ -477,7 +505,7 @@ def _cmd_log(args: argparse.Namespace) -> int:
                     print()
                     break
             print()
-        print(render_frame(frame))
+        print(printable(render_frame(frame), multiline=True))
         count += 1
     if count == 0:
         print("no node_status records to replay" + (f" for request {args.request}" if args.request else ""))
@@ -538,15 +566,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return code
     except BrokenPipeError:  # stdout's reader went away (`| head`): exit quietly
         return detach_stdout()
-    except InputError as e:
+    except InputError as e:  # problems quote user text (keys, values, file names): escape it
         for p in e.problems:
-            print(str(p), file=sys.stderr)
+            print(printable(p), file=sys.stderr)
         return EXIT_INPUT
     except UsageError as e:
-        print(str(e), file=sys.stderr)
+        print(printable(e), file=sys.stderr)
         return EXIT_INPUT
     except BackendStartError as e:
-        print(f"mmexec: {e}", file=sys.stderr)
+        print(printable(f"mmexec: {e}"), file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("mmexec: interrupted", file=sys.stderr)
@@ -556,6 +584,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         where = f" (log: {_CURRENT_LOG[0]})" if _CURRENT_LOG[0] else ""
         msg = str(e).splitlines()[0] if str(e) else ""
-        print(f"mmexec: internal error: {type(e).__name__}: {msg}{where}; set MMEXEC_DEBUG=1 for details",
+        print(printable(f"mmexec: internal error: {type(e).__name__}: {msg}{where}; set MMEXEC_DEBUG=1 for details"),
               file=sys.stderr)
         return EXIT_FAILED

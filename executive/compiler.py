@@ -21,20 +21,26 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from collections.abc import Callable, Mapping
+import math
+import os
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from py_trees.common import Status
 
+import mmexec.trees
 from mmexec.config.yamlload import (
     InputError,
     Mark,
+    Problem,
     Problems,
     did_you_mean,
+    is_within,
     load_yaml_bytes,
     load_yaml_text,
+    read_file,
 )
 from mmexec.executive import nodes as N
 from mmexec.executive.context import ExecContext
@@ -52,7 +58,16 @@ from mmexec.executive.schema import (
 from mmexec.executive.values import Const, Expr, substitute
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
-__all__ = ["MAX_INCLUDE_DEPTH", "MAX_TREE_NODES", "Mission", "MissionTree", "convert_value", "load_mission"]
+__all__ = [
+    "MAX_INCLUDE_DEPTH",
+    "MAX_TREE_NODES",
+    "TREES_DIR",
+    "Mission",
+    "MissionTree",
+    "convert_value",
+    "include_roots",
+    "load_mission",
+]
 
 log = logging.getLogger(__name__)
 
@@ -60,11 +75,39 @@ log = logging.getLogger(__name__)
 MAX_INCLUDE_DEPTH = 16
 #: most nodes a mission may have once includes are expanded
 MAX_TREE_NODES = 50_000
+#: the project's shipped missions and subtrees (``trees/``): any mission may include them
+TREES_DIR = Path(os.path.realpath(next(iter(mmexec.trees.__path__))))
+
+
+def include_roots(mission: str | Path, extra: Iterable[str | Path] = ()) -> tuple[Path, ...]:
+    """The folders a mission's includes may come from: the mission's own folder tree,
+    the project's ``trees/`` and ``extra`` (the config's ``roots:``), symlinks resolved."""
+    own = Path(os.path.realpath(mission)).parent
+    return (own, TREES_DIR, *(Path(os.path.realpath(r)) for r in extra))
+
+
+def _finite(value: Any, what: str) -> Any:
+    """``value``, or ValueError when it is or holds (in a list or mapping) a NaN or an infinity."""
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ValueError(f"{what}: expected a finite number, got {value!r}")
+        if isinstance(v, dict):
+            stack.extend(v.values())
+        elif isinstance(v, list):
+            stack.extend(v)
+    return value
 
 
 def convert_value(tp: type, value: Any, what: str) -> Any:
     """Convert ``value`` (a typed value, or a command-line string like ``"3"``) to
-    declared type ``tp``. Raises ValueError with a one-line message."""
+    declared type ``tp``. Raises ValueError with a one-line message, also for a NaN or
+    an infinity (``nan``, ``inf``, ``1e999``, or one inside a list or mapping)."""
+    return _finite(_convert(tp, value, what), what)
+
+
+def _convert(tp: type, value: Any, what: str) -> Any:
     if isinstance(value, str) and tp is not str:
         text = value.strip()
         try:
@@ -346,11 +389,13 @@ class _Builder:
 
 
 class _Loader:
-    """Reads files, resolves includes (cached, cycle- and depth-checked)."""
+    """Reads files, resolves includes (cached, cycle- and depth-checked, and confined to
+    ``roots``: an include outside them is never opened, so its content is never shown)."""
 
-    def __init__(self, registry: SkillRegistry, problems: Problems) -> None:
+    def __init__(self, registry: SkillRegistry, problems: Problems, roots: tuple[Path, ...]) -> None:
         self.registry = registry
         self.p = problems
+        self.roots = roots
         self.files: dict[Path, FileSpec | None] = {}
         self.hashes: dict[Path, str] = {}
         self.order: list[Path] = []
@@ -358,7 +403,7 @@ class _Loader:
         self.display: dict[Path, str] = {}
 
     def load(self, path: Path, display: str, mark: Mark | None, label: str = "") -> FileSpec | None:
-        key = path.resolve()
+        key = Path(os.path.realpath(path))  # a symlink loop stays as it is; reading it reports the loop
         if key in self.stack:
             chain = " -> ".join(self.display[p] for p in self.stack[self.stack.index(key):]) + f" -> {display}"
             assert mark is not None
@@ -371,14 +416,11 @@ class _Loader:
             self.p.add(mark, f"includes nest deeper than {MAX_INCLUDE_DEPTH} files")
             return None
         try:
-            if not key.is_file():
-                where = mark or Mark(display, 1, 1)
-                self.p.add(where, f"include {label or repr(display)}: no such file ({key})" if mark else "no such file")
-                self.files[key] = None
-                return None
-            data = key.read_bytes()
-        except OSError as e:
-            self.p.add(mark or Mark(display, 1, 1), f"cannot read {display}: {e.strerror or e}")
+            data = read_file(path)
+        except InputError as e:
+            # the top file's own problem as it is; an include's at the include line
+            self.p.extend(e.problems if mark is None else
+                          [Problem(mark, f"include {label or repr(display)}: {p.message}") for p in e.problems])
             self.files[key] = None
             return None
         self.display[key] = display
@@ -402,6 +444,10 @@ class _Loader:
     def include(self, base: Path, base_display: str, rel: str, mark: Mark) -> FileSpec | None:
         target = (base.parent / rel)
         shown = str(Path(base_display).parent / rel)
+        if not is_within(target, self.roots):
+            self.p.add(mark, f"include {rel!r}: outside the folders a mission may include from "
+                             f"({', '.join(map(str, self.roots))}); name its folder in the config's 'roots:' to allow it")
+            return None
         return self.load(target, shown, mark, repr(rel))
 
 
@@ -450,11 +496,12 @@ def _recovery_keys(prefix: str) -> str:
     return ", ".join(f"{prefix}.{suffix}" for suffix in RECOVERY_SUFFIXES)
 
 
-def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY) -> Mission:
+def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY, roots: Iterable[str | Path] = ()) -> Mission:
     """Parse and validate a mission and every file it includes. Raises InputError
-    listing every problem (``FILE:LINE:COL: message``)."""
+    listing every problem (``FILE:LINE:COL: message``). Includes may come from the
+    mission's folder tree, the project's ``trees/`` and ``roots`` (see :func:`include_roots`)."""
     problems = Problems()
-    loader = _Loader(registry, problems)
+    loader = _Loader(registry, problems, include_roots(path, roots))
     p = Path(path)
     top = loader.load(p, str(path), None)
     if top is None or top.tree is None:

@@ -4,7 +4,7 @@ A run config is YAML loaded through :mod:`mmexec.config.yamlload` and bound into
 :class:`RunConfig`, so every problem is reported as ``FILE:LINE:COL: key: message``::
 
     backend: mock            # mock | sim | robot
-    rate_hz: 20              # tick rate [Hz of clock time]
+    rate_hz: 20              # tick rate [Hz of clock time], 1..1000
     mock: {...}              # options for the backend named by `backend` (one section
     sim: {...}               #   per backend name; only the selected one is read)
     profile:                 # robot profile read by skills: each section is declared by
@@ -12,7 +12,9 @@ A run config is YAML loaded through :mod:`mmexec.config.yamlload` and bound into
       home: [0.0, 0.0, 0.0]                      #   (mmexec.skills.profile), checked at load
     skills:
       modules: [my_lab.skills]   # user skill modules to import (the ONLY way user code loads)
+    roots: [../shared]           # more folders includes and sim worlds may come from
 
+No number in a config may be NaN or infinite (:func:`~mmexec.config.yamlload.bind`).
 The backend factory maps a backend name to a builder ``build(section, *, profile, seed,
 options) -> Robot`` (see :data:`BACKENDS`); the section is passed still as a
 :class:`~mmexec.config.yamlload.YDict` so the builder can report positions.
@@ -23,12 +25,23 @@ from __future__ import annotations
 import hashlib
 import importlib
 import logging
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, load_yaml
+from mmexec.config.yamlload import (
+    InputError,
+    Mark,
+    Problem,
+    Problems,
+    YDict,
+    bind,
+    is_within,
+    load_yaml_bytes,
+    read_file,
+)
 from mmexec.drivers.interfaces import Robot
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
@@ -79,6 +92,10 @@ CAPABILITIES: tuple[str, ...] = ("base", "arm", "gripper", "camera", "lidar")
 BUILTIN_SKILL_MODULES: tuple[str, ...] = ("mmexec.skills.primitives", "mmexec.skills.fetch")
 
 
+#: Tick rates a config or ``--rate`` may ask for [Hz of clock time].
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1000.0
+
+
 @dataclass(frozen=True)
 class SkillsConfig:
     """``skills:`` section: ``modules`` are imported (in order) to register user skills."""
@@ -97,10 +114,13 @@ class RunConfig:
     mock: Any = None
     sim: Any = None
     robot: Any = None
+    #: more folders (relative to the config file) that mission includes and world files
+    #: may come from, besides the mission's folder, trees/ and sim/worlds/
+    roots: list[str] = field(default_factory=list)
 
     def validate(self) -> list[str]:
-        if not 0.0 < self.rate_hz <= 1000.0:
-            return [f"rate_hz: expected a tick rate in (0, 1000] Hz, got {self.rate_hz:g}"]
+        if not MIN_RATE_HZ <= self.rate_hz <= MAX_RATE_HZ:
+            return [f"rate_hz: expected a tick rate in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {self.rate_hz:g}"]
         return []
 
 
@@ -126,11 +146,38 @@ class LoadedConfig:
         """Where ``key``'s value is in the file (the file start if absent)."""
         return self.raw.value_mark(key)
 
+    @property
+    def roots(self) -> tuple[Path, ...]:
+        """The config's ``roots:``, resolved against the config file's folder."""
+        return tuple(Path(os.path.realpath(self.path.parent / r)) for r in self.config.roots)
+
+
+def _check_paths(path: Path, cfg: RunConfig, raw: YDict, problems: Problems) -> None:
+    """Each ``roots:`` entry is a folder; a sim ``world`` given as a path lies inside the
+    config's folder tree, trees/, sim/worlds/ or a root (it is never opened otherwise)."""
+    roots_raw = raw.get("roots")
+    roots = [Path(os.path.realpath(path.parent / r)) for r in cfg.roots]
+    for i, root in enumerate(roots):
+        if not root.is_dir():
+            problems.add(roots_raw.item_mark(i), f"roots[{i}]: {cfg.roots[i]!r} is not a folder ({root})")
+    world = cfg.sim.get("world") if cfg.backend == "sim" and isinstance(cfg.sim, dict) else None
+    # sim.world reads a value with a '/' or a .yaml/.yml ending as a path (from the
+    # current folder), anything else as the name of a shipped world
+    if isinstance(world, str) and ("/" in world or world.endswith((".yaml", ".yml"))):
+        from mmexec.executive.compiler import TREES_DIR
+        from mmexec.sim.world import WORLDS_DIR
+
+        allowed = (Path(os.path.realpath(path)).parent, WORLDS_DIR, TREES_DIR, *roots)
+        if not is_within(world, allowed):
+            problems.add(cfg.sim.value_mark("world"), f"sim.world: {world!r} is outside the folders a world may come "
+                         f"from ({', '.join(map(str, allowed))}); name its folder in 'roots:' to allow it")
+
 
 def load_config(path: str | Path) -> LoadedConfig:
     """Load and bind a run config. Raises InputError with every problem located."""
     p = Path(path)
-    raw = load_yaml(p)
+    data = read_file(p)
+    raw = load_yaml_bytes(data, str(path))
     name = str(path)
     if not isinstance(raw, YDict):
         raise InputError.at(getattr(raw, "mark", Mark(name, 1, 1)),
@@ -143,7 +190,9 @@ def load_config(path: str | Path) -> LoadedConfig:
             problems.add(raw.value_mark(key), f"{key}: expected a mapping of backend options, got {value!r}")
     problems.raise_if_any()
     assert isinstance(cfg, RunConfig)
-    digest = hashlib.sha256(p.read_bytes()).hexdigest()
+    _check_paths(p, cfg, raw, problems)
+    problems.raise_if_any()
+    digest = hashlib.sha256(data).hexdigest()
     return LoadedConfig(p, digest, cfg, raw)
 
 
@@ -171,6 +220,8 @@ def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = RE
             missing = e.name or module
             detail = "no such module" if missing == module else f"it imports {missing!r}, which is not installed"
             problems.add(mark, f"skills.modules[{i}]: cannot import {module!r}: {detail}")
+        except SystemExit as e:  # user code calling sys.exit() at import must not end mmexec
+            problems.add(mark, f"skills.modules[{i}]: cannot import {module!r}: it called sys.exit({e.code!r})")
         except Exception as e:  # noqa: BLE001 - user code: any import failure is a config problem
             where = ""
             if isinstance(e, SyntaxError) and e.filename:

@@ -38,10 +38,11 @@ from typing import Any, TextIO
 
 import py_trees
 
-from mmexec.config.yamlload import InputError, Mark, Problem
+from mmexec.config.yamlload import InputError, Mark, Problem, read_file
 from mmexec.drivers.interfaces import Robot
 from mmexec.executive.config import LoadedConfig, build_robot, load_config, load_skill_modules
 from mmexec.executive.eventlog import EventLog
+from mmexec.executive.textsafe import printable
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
 __all__ = [
@@ -156,10 +157,10 @@ def _versions() -> dict[str, str]:
 def _file_sha256(paths: Sequence[Path | str]) -> str:
     h = hashlib.sha256()
     for p in paths:
-        try:
-            h.update(Path(p).read_bytes())
-        except OSError as e:  # a deleted include is a change too; the reload reports it
-            h.update(f"<unreadable {p}: {e.strerror}>".encode())
+        try:  # never waits on a FIFO or reads /dev/zero the file was replaced by
+            h.update(read_file(p))
+        except InputError as e:  # a deleted or unreadable include is a change too; the reload reports it
+            h.update(f"<unreadable {e}>".encode())
     return h.hexdigest()
 
 
@@ -182,6 +183,7 @@ class Progress:
             return
         self._last = now
         width = shutil.get_terminal_size((100, 20)).columns
+        text = printable(text)  # node paths come from user files
         if len(text) >= width:
             text = text[: max(10, width - 2)] + "…"
         self.stream.write("\r" + text + "\x1b[K")
@@ -249,7 +251,7 @@ class Runner:
         opts = self.options
         self.config = load_config(opts.config)
         load_skill_modules(self.config, self.registry)
-        self.mission = load_mission(opts.mission, registry=self.registry)
+        self.mission = load_mission(opts.mission, registry=self.registry, roots=self._roots())
         self._mission_digest = _file_sha256(self._mission_files())
         self._requests = self._validate_requests(self.mission)
         if opts.rate_hz is not None and not 0.0 < opts.rate_hz <= 1000.0:
@@ -497,7 +499,7 @@ class Runner:
             return
         self.progress.clear()
         try:
-            mission = load_mission(self.options.mission, registry=self.registry)
+            mission = load_mission(self.options.mission, registry=self.registry, roots=self._roots())
             remaining = self._validate_with(mission, next_index)
         except InputError as e:
             self._rejected_digest = digest
@@ -514,6 +516,10 @@ class Runner:
         self._requests[next_index:] = remaining
         self.log.write("mission_reload", ok=True, mission_sha256=mission.sha256)
         self._say(f"mmexec: reloaded {self.options.mission} (sha256 {mission.sha256[:12]})")
+
+    def _roots(self) -> tuple[Path, ...]:
+        """The config's ``roots:`` (more folders the mission's includes may come from)."""
+        return self.config.roots if self.config is not None else ()
 
     def _validate_with(self, mission: Any, start: int) -> list[dict[str, Any]]:
         reqs = self.options.requests or [Request({}, ArgMark("mmexec run (no --request given)", 0, 0))]
@@ -544,7 +550,9 @@ class Runner:
         self._say(f"{ok}/{n} requests succeeded, {failed} failed{extra} ({outcome}); log: {self.log_path}")
 
     def _say(self, line: str, stream: TextIO | None = None) -> None:
-        """Write one line of user-facing output (the run's console, not logging)."""
+        """Write one line of user-facing output (the run's console, not logging), its
+        terminal control characters escaped (report messages, requests and reasons are
+        user text)."""
         s = stream if stream is not None else self.out
-        s.write(line + "\n")
+        s.write(printable(line) + "\n")
         s.flush()

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mmexec.config.yamlload import Mark, Problems, YDict, YList, did_you_mean
+from mmexec.config.yamlload import Mark, Problems, YDict, YList, did_you_mean, refuse_nonfinite
 from mmexec.executive.nodes import OPS
 from mmexec.executive.values import (
     KEY_RE,
@@ -34,6 +34,8 @@ from mmexec.skills.base import Param, SkillRegistry, SkillSpec
 __all__ = [
     "COMPOSITES",
     "DECORATORS",
+    "MAX_COUNT",
+    "MAX_SECONDS",
     "NODE_TYPES",
     "SIZE_CAP",
     "TYPE_NAMES",
@@ -79,6 +81,10 @@ RECOVERY_SUFFIXES = ("attempts", "recoveries", "last_failure", "outcome")
 FAILURE_KEYS = {"last_failure": str, "last_failure_kind": str, "last_failure_node": str}
 #: node counts above this are reported as this (a bound, not a count, for include bombs)
 SIZE_CAP = 1 << 40
+#: most attempts a retry, repetitions a repeat, or recoveries a recovery node may have
+MAX_COUNT = 1000
+#: longest wait or timeout a mission may give [clock s] (about 11.6 days)
+MAX_SECONDS = 1e6
 
 
 def recovery_key_prefix(spec: NodeSpec) -> str:
@@ -151,6 +157,12 @@ def _tname(value: Any) -> str:
     if isinstance(value, dict):
         return "a mapping"
     return type(value).__name__
+
+
+def _short(value: Any) -> str:
+    """``repr(value)``, shortened to its first 40 characters (an integer may have thousands of digits)."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:40] + f"... ({len(text)} characters)"
 
 
 def accepts(tp: type, value: Any) -> bool:
@@ -270,7 +282,11 @@ class _Parser:
             decl = ParamDecl(name, tp, doc=str(doc_s), mark=km)
             if "default" in d:
                 decl.default, decl.has_default = d["default"], True
-                if not accepts(tp, d["default"]):
+                before = len(self.p)
+                refuse_nonfinite(d["default"], d.value_mark("default"), f"{key}.{name}.default", self.p)
+                if len(self.p) > before:  # keep the declaration: its uses are not also problems
+                    decl.default, decl.has_default = None, False
+                elif not accepts(tp, d["default"]):
                     self.err(d.value_mark("default"), f"{key}.{name}: default {d['default']!r} is not {tp_name}")
                     ok = False
             if ok:
@@ -282,6 +298,12 @@ class _Parser:
         return name in self.params
 
     def value(self, raw: Any, mark: Mark, what: str) -> Expr | None:
+        """Parse a mission value; None (a problem recorded) when it is malformed or holds
+        a NaN or an infinity anywhere (no mission value may be non-finite)."""
+        before = len(self.p)
+        refuse_nonfinite(raw, mark, what, self.p)
+        if len(self.p) > before:
+            return None
         try:
             e = parse_value(raw, self.is_param)
         except ValueSyntaxError as ex:
@@ -380,9 +402,15 @@ class _Parser:
             if required:
                 self.err(spec.mark, f"{spec.kind}: missing required key {key!r} (an integer >= {minimum})")
             return None
-        v = raw[key]
+        return self.bounded_int(raw[key], raw.value_mark(key), f"{spec.kind}.{key}", minimum)
+
+    def bounded_int(self, v: Any, mark: Mark, what: str, minimum: int) -> int | None:
+        """``v`` when it is an integer in ``minimum..MAX_COUNT``, else None (a problem recorded)."""
         if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
-            self.err(raw.value_mark(key), f"{spec.kind}.{key}: expected an integer >= {minimum}, got {v!r}")
+            self.err(mark, f"{what}: expected an integer >= {minimum}, got {_short(v)}")
+            return None
+        if v > MAX_COUNT:
+            self.err(mark, f"{what}: {_short(v)} is more than the limit of {MAX_COUNT}")
             return None
         return v
 
@@ -395,6 +423,9 @@ class _Parser:
             if not math.isfinite(secs) or secs < 0 or (positive and secs == 0):
                 got = "an integer too large for a float" if isinstance(raw, int) and secs == math.inf else repr(raw)
                 self.err(mark, f"{what}: expected a number of seconds {'> 0' if positive else '>= 0'}, got {got}")
+                return None
+            if secs > MAX_SECONDS:
+                self.err(mark, f"{what}: {secs:g} s is more than the limit of {MAX_SECONDS:g} s")
                 return None
             return Const(secs)
         if isinstance(raw, str) and "{" in raw:
@@ -638,14 +669,12 @@ class _Parser:
                 parts[k] = self.child(arg[k], arg.value_mark(k), depth, f"recovery.{k}")
             elif k != "give_up":
                 self.err(arg.mark, f"recovery: missing required key {k!r} (a node)")
-        mr = arg.get("max_recoveries")
+        mr: int | None = 0
         if "max_recoveries" not in arg:
             self.err(arg.mark, "recovery: missing required key 'max_recoveries' (an integer >= 0)")
-            mr = 0
-        elif isinstance(mr, bool) or not isinstance(mr, int) or mr < 0:
-            self.err(arg.value_mark("max_recoveries"), f"recovery.max_recoveries: expected an integer >= 0, got {mr!r}")
-            mr = 0
-        spec.opts["max_recoveries"] = mr
+        else:
+            mr = self.bounded_int(arg["max_recoveries"], arg.value_mark("max_recoveries"), "recovery.max_recoveries", 0)
+        spec.opts["max_recoveries"] = mr or 0
         spec.opts["has_give_up"] = parts.get("give_up") is not None
         spec.children = [c for c in (parts.get("action"), parts.get("recovery"), parts.get("give_up")) if c is not None]
         self.recoveries.append(spec)

@@ -42,6 +42,15 @@ __all__ = [
 ]
 
 WORLDS_DIR = Path(__file__).parent / "worlds"
+#: longest side a room may have [m]: the navigation grid (5 cm cells) of a larger room
+#: would take gigabytes (every number in a world is also finite: the loader refuses
+#: .nan and .inf)
+MAX_ROOM_SIZE = 100.0
+
+
+def _positive(what: str, *values: float) -> list[str]:
+    """``["<what> must be > 0"]`` when any of ``values`` is not, else ``[]``."""
+    return [f"{what} must be > 0"] if min(values) <= 0 else []
 
 
 @dataclass(frozen=True)
@@ -56,6 +65,8 @@ class Room:
         out = []
         if min(self.size) <= 0.5:
             out.append(f"room size {list(self.size)} too small (each side must exceed 0.5 m)")
+        if max(self.size) > MAX_ROOM_SIZE:
+            out.append(f"room size {list(self.size)} too large (each side at most {MAX_ROOM_SIZE:g} m)")
         if self.wall_height <= 0 or self.wall_thickness <= 0:
             out.append("wall_height and wall_thickness must be > 0")
         return out
@@ -93,6 +104,12 @@ class Table:
     pose: tuple[float, float, float]
     size: tuple[float, float, float] = (0.8, 0.6, 0.45)
     top_thickness: float = 0.03
+
+    def validate(self) -> list[str]:
+        out = _positive(f"table {self.name!r}: size and top_thickness", *self.size, self.top_thickness)
+        if not out and self.top_thickness >= self.size[2]:
+            out.append(f"table {self.name!r}: top_thickness {self.top_thickness} m is not below its height {self.size[2]} m")
+        return out
 
 
 @dataclass(frozen=True)
@@ -145,6 +162,9 @@ class Depot:
     size: tuple[float, float, float] = (0.4, 0.3, 0.15)
     thickness: float = 0.01
 
+    def validate(self) -> list[str]:
+        return _positive(f"depot {self.name!r}: size and thickness", *self.size, self.thickness)
+
 
 @dataclass(frozen=True)
 class Obstacle:
@@ -156,6 +176,10 @@ class Obstacle:
     size: tuple[float, float, float]
     shape: Literal["box", "cylinder"] = "box"
 
+    def validate(self) -> list[str]:
+        dims = self.size if self.shape == "box" else (self.size[0], self.size[2])
+        return _positive(f"obstacle {self.name!r}: size", *dims)
+
 
 @dataclass(frozen=True)
 class Reflector:
@@ -165,6 +189,9 @@ class Reflector:
     position: tuple[float, float]
     radius: float = 0.025
     height: float = 1.0
+
+    def validate(self) -> list[str]:
+        return _positive(f"reflector {self.name!r}: radius and height", self.radius, self.height)
 
 
 @dataclass(frozen=True)
@@ -179,6 +206,11 @@ class Randomize:
     start_xy: float = 0.0
     start_yaw: float = 0.0
     obstacle_xy: float = 0.0
+
+    def validate(self) -> list[str]:
+        if min(self.item_xy, self.item_yaw, self.start_xy, self.start_yaw, self.obstacle_xy) < 0:
+            return ["randomize: half-ranges must be >= 0"]
+        return []
 
 
 @dataclass(frozen=True)

@@ -58,12 +58,25 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _require_finite(skill_name: str, **values: float | Sequence[float] | None) -> None:
+    """Raise SkillFailure(PRECONDITION) naming the first parameter that is, or holds, a NaN
+    or an infinity (None means "not given" and passes). The mission loader already
+    refuses such constants; this also stops ones that arrive through the blackboard or a
+    robot profile before they reach a motor (a NaN goal would drive the base forever)."""
+    for name, value in values.items():
+        items = value if isinstance(value, Sequence) else [value]
+        for x in items:
+            if isinstance(x, (int, float)) and not isinstance(x, bool) and not math.isfinite(x):
+                raise SkillFailure(FailureKind.PRECONDITION, f"{skill_name}: {name} must be a finite number, got {value!r}")
+
+
 # --------------------------------------------------------------------------- wait / report
 
 
 @skill("wait", params=[Param("seconds", float, unit="s", required=True, doc="clock time to wait")])
 def wait(ctx: SkillContext, seconds: float) -> Gen:
     """Succeed after ``seconds`` of clock time."""
+    _require_finite("wait", seconds=seconds)
     if seconds < 0:
         raise SkillFailure(FailureKind.PRECONDITION, f"wait: seconds must be >= 0, got {seconds:g}")
     end = ctx.clock.now() + seconds
@@ -135,6 +148,7 @@ def move_arm(
     else:
         assert pose is not None
         q = _named_pose(ctx.profile, pose)
+    _require_finite("move_arm", joints=q, speed_scale=speed_scale, timeout=timeout)
     if len(q) != len(arm.joint_names):
         raise SkillFailure(
             FailureKind.PRECONDITION,
@@ -169,6 +183,7 @@ def open_gripper(ctx: SkillContext, width: float | None = None, speed: float = 0
     """Open the gripper fully, or to ``width`` [m]."""
     gripper = ctx.robot.gripper
     assert gripper is not None
+    _require_finite("open_gripper", width=width, speed=speed, force=force)
     goal = gripper.open(speed=speed, force=force) if width is None else gripper.move(width, speed=speed, force=force)
     yield from wait_goal(ctx, goal)
     return {}
@@ -190,6 +205,7 @@ def close_gripper(ctx: SkillContext, force: float = 50.0, speed: float = 0.1, ex
     POSTCONDITION failure."""
     gripper = ctx.robot.gripper
     assert gripper is not None
+    _require_finite("close_gripper", force=force, speed=speed)
     goal = gripper.close(speed=speed, force=force)
     yield from wait_goal(ctx, goal)
     holding = gripper.state().holding
@@ -281,6 +297,8 @@ def drive_to(
         if x is None or y is None:
             raise SkillFailure(FailureKind.PRECONDITION, "drive_to: 'x' and 'y' are required (or give 'place')")
         gx, gy, gth = x, y, theta
+    _require_finite("drive_to", x=gx, y=gy, theta=gth, tolerance=tolerance, angle_tolerance=angle_tolerance,
+                    max_linear=max_linear, max_angular=max_angular, timeout=timeout)
     if tolerance <= 0 or angle_tolerance <= 0 or max_linear <= 0 or max_angular <= 0:
         raise SkillFailure(FailureKind.PRECONDITION, "drive_to: tolerances and speed limits must be > 0")
     v_max = min(max_linear, base.max_linear)

@@ -57,7 +57,7 @@ def test_missing_backend_and_bad_rate(tmp_path: Path) -> None:
         load_config(p)
     assert "backend: missing required key" in str(ei.value)
     p = write(tmp_path, "backend: mock\nrate_hz: -5\n")
-    with pytest.raises(InputError, match=r"cfg.yaml:1:1: rate_hz: expected a tick rate in \(0, 1000\] Hz"):
+    with pytest.raises(InputError, match=r"cfg.yaml:1:1: rate_hz: expected a tick rate in \[1, 1000\] Hz"):
         load_config(p)
 
 
