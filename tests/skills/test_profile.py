@@ -18,6 +18,12 @@ def _profile(text: str):
     return load_yaml_text(text, "c.yaml")["profile"]
 
 
+def _problems(text: str) -> list[str]:
+    """The problems PROFILE.check finds in the config text's profile, sorted."""
+    raw = _profile(text)
+    return sorted(map(str, PROFILE.check(raw, raw.mark)[1]))
+
+
 @pytest.mark.parametrize("bounds, text", [
     (Bounds(gt=0), "> 0"), (Bounds(ge=0), ">= 0"), (Bounds(lt=5), "< 5"), (Bounds(le=5), "<= 5"),
     (Bounds(gt=0, le=1), "in (0, 1]"), (Bounds(ge=1, le=180), "in [1, 180]"), (Bounds(ge=0, lt=1), "in [0, 1)"),
@@ -39,10 +45,8 @@ def test_the_fetch_section_is_declared_by_the_fetch_package() -> None:
 
 
 def test_ranges_are_located_at_each_value_and_list_item() -> None:
-    raw = _profile("profile:\n  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
-                   "    approach_distances: [0.3, -0.1]\n    nav: {max_v: 0, margin: -0.5}\n")
-    _bound, problems = PROFILE.check(raw, raw.mark)
-    assert sorted(map(str, problems)) == [
+    assert _problems("profile:\n  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
+                     "    approach_distances: [0.3, -0.1]\n    nav: {max_v: 0, margin: -0.5}\n") == [
         "c.yaml:4:31: profile.fetch.approach_distances[1]: expected > 0 m, got -0.1",
         "c.yaml:5:18: profile.fetch.nav.max_v: expected > 0 m/s, got 0",
         "c.yaml:5:29: profile.fetch.nav.margin: expected >= 0 m, got -0.5",
@@ -99,27 +103,21 @@ def test_a_profile_set_up_in_code_fails_the_skill_with_the_range_problem(mock_ro
 
 
 def test_named_pose_roles_must_name_a_named_pose_defaults_included() -> None:
-    raw = _profile("profile:\n  named_poses: {tuck: [0, 0], carry: [0, 1]}\n"
-                   "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
-                   "    arm: {stow: tuk, carry: carry, look: gaze}\n")
-    _bound, problems = PROFILE.check(raw, raw.mark)
-    assert sorted(map(str, problems)) == [
+    assert _problems("profile:\n  named_poses: {tuck: [0, 0], carry: [0, 1]}\n"
+                     "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
+                     "    arm: {stow: tuk, carry: carry, look: gaze}\n") == [
         "c.yaml:5:17: profile.fetch.arm.stow: 'tuk' is not one of profile.named_poses; did you mean 'tuck'?",
         "c.yaml:5:42: profile.fetch.arm.look: 'gaze' is not one of profile.named_poses (known: carry, tuck)",
     ]
-    raw = _profile("profile:\n  named_poses: {tuck: [0, 0]}\n"
-                   "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n    arm: {stow: tuck}\n")
-    _bound, problems = PROFILE.check(raw, raw.mark)
-    assert list(map(str, problems)) == [
+    assert _problems("profile:\n  named_poses: {tuck: [0, 0]}\n"
+                     "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n    arm: {stow: tuck}\n") == [
         "c.yaml:5:10: profile.fetch.arm.carry: 'sleep' (the default) is not one of profile.named_poses (known: tuck)"]
 
 
 def test_a_named_pose_typo_is_reported_with_the_other_problems_of_its_section() -> None:
-    raw = _profile("profile:\n  named_poses: {tuck: [0, 0]}\n"
-                   "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
-                   "    detect_frames: 0\n    arm: {stow: tuk}\n")
-    _bound, problems = PROFILE.check(raw, raw.mark)
-    assert sorted(map(str, problems)) == [
+    assert _problems("profile:\n  named_poses: {tuck: [0, 0]}\n"
+                     "  fetch:\n    depot: {base: [1, 2, 0], place: [1, 2, 0.3]}\n"
+                     "    detect_frames: 0\n    arm: {stow: tuk}\n") == [
         "c.yaml:5:20: profile.fetch.detect_frames: expected >= 1, got 0",
         "c.yaml:6:17: profile.fetch.arm.stow: 'tuk' is not one of profile.named_poses; did you mean 'tuck'?",
     ]
