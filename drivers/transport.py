@@ -190,6 +190,19 @@ class SerialTransport:
         except _PORT_ERRORS as e:
             raise LinkClosed(self.port, f"flush failed: {e}") from e
 
+    def set_dtr(self, active: bool) -> bool:
+        """Drive the DTR modem line (some adapters wire it to a device input, e.g. the
+        RPLIDAR A2's motor enable). Returns False when the port has no modem lines (a
+        pseudo-terminal answers ENOTTY); raises LinkClosed when the port failed."""
+        ser = self._require()
+        try:
+            ser.dtr = active
+        except _PORT_ERRORS as e:  # SerialException is an OSError too, without an errno
+            if isinstance(e, OSError) and e.errno in (errno.ENOTTY, errno.EINVAL):
+                return False
+            raise LinkClosed(self.port, f"setting DTR failed: {e}") from e
+        return True
+
     def __enter__(self) -> Self:
         self.open()
         return self
