@@ -18,16 +18,17 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = sorted([ROOT / "README.md", ROOT / "BENCHMARKS.md", *(ROOT / "docs").rglob("*.md")])
 #: top-level folders of the repository a doc may name paths in
 TOP = ("trees", "config", "docs", "sim", "skills", "executive", "drivers", "tests", "benchmarks")
-#: a repository path; one followed by ``:LINE`` is a sample error location, not a claim
-PATH = re.compile(rf"(?<![\w./<-])((?:{'|'.join(TOP)})/[\w./*-]*[\w*])(:\d+)?")
+#: a repository path
+PATH = re.compile(rf"(?<![\w./<-])((?:{'|'.join(TOP)})/[\w./*-]*[\w*])")
+#: a sample message (``FILE:LINE:COL: ...``): the files it names are examples
+SAMPLE = re.compile(r"[\w./-]+\.\w+:\d+:\d+: ")
 #: a relative markdown link target
 LINK = re.compile(r"\]\((?!https?://|#|mailto:)([^)#\s]+)")
 FENCE = re.compile(r"^```(\w*)\s*$")
 
 
 def _doc_lines(doc: Path) -> list[tuple[int, str, str | None]]:
-    """(line number, text, fence language or None outside a fence; "" for a fence
-    without a language, i.e. sample output)."""
+    """(line number, text, fence language or None outside a fence)."""
     out: list[tuple[int, str, str | None]] = []
     lang: str | None = None
     for i, line in enumerate(doc.read_text().splitlines(), 1):
@@ -49,12 +50,11 @@ def _missing_paths(doc: Path) -> list[str]:
     name = doc.relative_to(ROOT) if doc.is_relative_to(ROOT) else doc.name
     missing = []
     for i, line, lang in _doc_lines(doc):
-        if lang == "":
-            continue  # sample output: its files are examples
+        if SAMPLE.search(line):
+            continue  # a sample error message: its files are examples
         for m in PATH.finditer(line):
-            path, location = m.group(1), m.group(2)
-            if not location and not _exists(path, ROOT, doc.parent):
-                missing.append(f"{name}:{i}: {path}")
+            if not _exists(m.group(1), ROOT, doc.parent):
+                missing.append(f"{name}:{i}: {m.group(1)}")
         if lang is None:
             missing += [f"{name}:{i}: link {t}" for t in LINK.findall(line) if not (doc.parent / t).exists()]
     return missing
@@ -68,9 +68,10 @@ def test_every_repository_path_a_doc_names_exists(doc: Path) -> None:
 def test_the_path_check_finds_a_missing_file(tmp_path: Path) -> None:
     doc = tmp_path / "x.md"
     doc.write_text("See trees/nowhere.yaml and [this](gone.md).\n"
-                   "An error looks like `trees/fetch.yaml:12:14: unknown skill`.\n"
-                   "```\nconfig/example_only.yaml has none\n```\n")
-    assert [ln.split(": ", 1)[1] for ln in _missing_paths(doc)] == ["trees/nowhere.yaml", "link gone.md"]
+                   "An error looks like `trees/fetch.yaml:12:14: unknown skill in config/example.yaml`.\n"
+                   "```\nmmexec validate config/typo.yaml\n```\n")
+    assert [ln.split(": ", 1)[1] for ln in _missing_paths(doc)] == [
+        "trees/nowhere.yaml", "link gone.md", "config/typo.yaml"]
 
 
 def _tracked_text_files() -> list[Path]:

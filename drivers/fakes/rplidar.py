@@ -1,6 +1,6 @@
 """An RPLIDAR A2 that speaks the real serial protocol on a pseudo-terminal.
 
-Written from the vendor document (hardware-protocols.md section 5, Slamtec LR001)::
+Written from the vendor document (docs/protocols.md section 5, Slamtec LR001)::
 
     with RplidarFake() as fake:            # a 6 m x 4 m room, the lidar in its middle
         dev = RplidarDevice(RplidarConfig(port=fake.port))

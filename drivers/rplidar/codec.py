@@ -1,6 +1,6 @@
 """Slamtec RPLIDAR A2 serial protocol: pure functions over bytes (no I/O, no clocks).
 
-Facts from ``/work/shared/docs/hardware-protocols.md`` section 5 (Slamtec LR001):
+Facts from ``docs/protocols.md`` section 5 (Slamtec LR001):
 
 * a request is ``A5 CMD`` or, for commands with bit 7 set, ``A5 CMD SIZE PAYLOAD
   CHECKSUM`` where CHECKSUM is the XOR of every preceding byte, ``A5`` included;
@@ -82,7 +82,7 @@ class CodecError(ValueError):
 
 
 class Command(enum.IntEnum):
-    """Request command bytes (hardware-protocols.md 5.2). Bit 7 set = carries a payload."""
+    """Request command bytes (docs/protocols.md 5.2). Bit 7 set = carries a payload."""
 
     STOP = 0x25
     RESET = 0x40
@@ -247,7 +247,7 @@ def decode_descriptor(data: bytes) -> Descriptor:
     return Descriptor(word & 0x3FFFFFFF, SendMode(mode), data_type)
 
 
-#: descriptor each request is answered with (hardware-protocols.md 5.2)
+#: descriptor each request is answered with (docs/protocols.md 5.2)
 _RESPONSES: dict[Command, Descriptor] = {
     Command.GET_INFO: Descriptor(20, SendMode.SINGLE, DataType.INFO),
     Command.GET_HEALTH: Descriptor(3, SendMode.SINGLE, DataType.HEALTH),

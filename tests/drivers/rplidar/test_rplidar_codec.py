@@ -1,5 +1,5 @@
 """RPLIDAR codec against frames written by hand from the protocol document
-(hardware-protocols.md section 5), byte by byte."""
+(docs/protocols.md section 5), byte by byte."""
 
 from __future__ import annotations
 
