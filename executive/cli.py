@@ -52,6 +52,11 @@ class UsageError(Exception):
     """A bad command line (printed as one line, exit 2)."""
 
 
+class UserCodeExit(Exception):
+    """User code (a skill, a skill module) called ``sys.exit()`` while a command ran it
+    (printed as one line, exit 1, as the run's event log records)."""
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         raise UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
@@ -532,6 +537,13 @@ def _dispatch(argv: list[str]) -> int:
     if argv and argv[0] == "hw":
         return _cmd_hw(argv[1:])
     args = _parser().parse_args(argv)
+    try:
+        return _command(args, argv)
+    except SystemExit as e:  # only user code raises it past the parser: not mmexec's exit status
+        raise UserCodeExit(f"a skill or skill module called sys.exit({e.code!r}); the command was stopped") from None
+
+
+def _command(args: argparse.Namespace, argv: list[str]) -> int:
     if args.command is None:
         _parser().print_help()
         return EXIT_INPUT
@@ -575,6 +587,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_INPUT
     except BackendStartError as e:
         print(printable(f"mmexec: {e}"), file=sys.stderr)
+        return EXIT_FAILED
+    except UserCodeExit as e:
+        where = f" (log: {_CURRENT_LOG[0]})" if _CURRENT_LOG[0] else ""
+        print(printable(f"mmexec: {e}{where}"), file=sys.stderr)
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("mmexec: interrupted", file=sys.stderr)

@@ -310,6 +310,20 @@ def test_watch_keeps_serving_the_previous_version_when_the_mission_becomes_unrea
     assert err[1].startswith(f"{m}:1:1: "), err[1]
 
 
+def test_a_skill_calling_sys_exit_during_a_run_fails_the_command(tmp_path: Path) -> None:
+    """It exited 0 (the status user code passed to sys.exit), while the log said 1."""
+    m = tmp_path / "m.yaml"
+    m.write_text("tree:\n  skill: exit_now\n")
+    c = tmp_path / "c.yaml"
+    c.write_text("backend: mock\nskills:\n  modules: [hostile_skills]\n")
+    log = tmp_path / "run.jsonl"
+    res = mmexec("run", m, "--config", c, "--log", log, cwd=tmp_path)
+    assert res.rc == 1, res.err
+    expect = f"mmexec: a skill or skill module called sys.exit(0); the command was stopped (log: {log})"
+    assert res.err.splitlines() == [expect]
+    assert '"exit_code":1' in log.read_text().splitlines()[-1]
+
+
 # --------------------------------------------------------------------------- item 12: output
 
 

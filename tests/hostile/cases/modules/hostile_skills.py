@@ -2,6 +2,7 @@
 
 * ``fail_with(message)``: fails with ``message`` as its reason (user text that reaches
   the result line, the event log and ``mmexec log summary`` / ``replay``);
+* ``exit_now()``: calls ``sys.exit(0)`` in the middle of a run;
 * ``spoil_file(path, how)``: makes ``path`` unreadable between two requests of a
   ``--watch`` run: ``fifo`` (a named pipe nobody writes), ``loop`` (a symlink to
   itself) or ``folder`` (a directory). It does nothing when ``path`` is already spoiled,
@@ -11,6 +12,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Generator
 from pathlib import Path
 from typing import Any
@@ -23,6 +25,13 @@ def fail_with(ctx: SkillContext, message: str) -> Generator[None, None, dict[str
     """Fail at once with ``message``."""
     yield from ()
     raise SkillFailure(FailureKind.EXECUTION, message)
+
+
+@skill("exit_now")
+def exit_now(ctx: SkillContext) -> Generator[None, None, dict[str, Any]]:
+    """End the interpreter from inside a tick, as careless user code might."""
+    yield
+    sys.exit(0)
 
 
 @skill("spoil_file", params=[Param("path", str, required=True), Param("how", str, required=True,
