@@ -338,11 +338,14 @@ class TrialSpec:
 
     @property
     def command(self) -> str:
-        """The shell command reproducing this trial alone (without ``--log``)."""
+        """The shell command reproducing this trial alone (without ``--log`` and its
+        ``--overwrite``)."""
         argv = list(self.argv)
         if "--log" in argv:
             i = argv.index("--log")
             del argv[i:i + 2]
+        if "--overwrite" in argv:
+            argv.remove("--overwrite")
         return shlex.join(["mmexec", *argv])
 
 
@@ -664,7 +667,8 @@ class Campaign:
         if not o.recovery:
             argv.append("--no-recovery")
         log_path = self.trials_dir / f"{index:04d}.jsonl"
-        argv += ["--log", str(log_path)]
+        # --overwrite: a resumed campaign runs an interrupted trial again into its own log
+        argv += ["--log", str(log_path), "--overwrite"]
         return TrialSpec(index, seed, tuple(argv), str(log_path), str(self.trials_dir / f"{index:04d}.out"),
                          cwd, o.trial_timeout)
 

@@ -11,7 +11,10 @@ Exit codes:
   cannot honour them, a configured device that cannot be brought up: no such port, no
   answer, located at its config section; bad ``--request``, unknown skill module, bad
   command line), with one line per problem on stderr and no traceback;
-* 130: interrupted (Ctrl-C): the tree was halted, the robot left safe, the log flushed;
+* 130, 143, 129: ``run`` halted by SIGINT (Ctrl-C, also during start-up), SIGTERM or
+  SIGHUP (128 + the signal): the tree was halted, the robot left safe, the log ended;
+  ``run`` also exits 1 when its event log cannot be written (disk full), the robot
+  stopped, and 2 when ``--log`` exists (without ``--overwrite``) or cannot be used;
 * 141: the reader of standard output went away (``mmexec show ... | head``): the
   command stopped writing and exited quietly (128 + SIGPIPE, as a Unix tool reports).
 
@@ -21,20 +24,25 @@ path when a run had started) and exits 1; ``MMEXEC_DEBUG=1`` shows the traceback
 
 from __future__ import annotations
 
-import argparse
-import contextlib
-import importlib.resources
-import logging
-import os
 import sys
-from collections.abc import Iterator, Sequence
-from pathlib import Path
-from typing import Any, NoReturn
 
-from mmexec.config.brokenpipe import detach_stdout
-from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
-from mmexec.executive.runner import ArgMark, BackendStartError
-from mmexec.executive.textsafe import printable
+try:  # Ctrl-C while the command is still importing (a tenth of a second) exits 130 quietly too
+    import argparse
+    import contextlib
+    import importlib.resources
+    import logging
+    import os
+    from collections.abc import Iterator, Sequence
+    from pathlib import Path
+    from typing import Any, NoReturn
+
+    from mmexec.config.brokenpipe import detach_stdout
+    from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
+    from mmexec.executive.runner import ArgMark, BackendStartError
+    from mmexec.executive.textsafe import printable
+except KeyboardInterrupt:
+    print("mmexec: interrupted", file=sys.stderr)
+    raise SystemExit(130) from None
 
 __all__ = ["main"]
 
@@ -84,7 +92,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--requests", type=Path, metavar="FILE", help="YAML list of request mappings (served after --request ones)")
     r.add_argument("--param", action="append", default=[], metavar="K=V", help="override a mission parameter")
     r.add_argument("--seed", type=int)
-    r.add_argument("--log", type=Path, metavar="FILE", help="event log (default mmexec-logs/<mission>-<time>.jsonl)")
+    r.add_argument("--log", type=Path, metavar="FILE",
+                   help="event log, a new file (default mmexec-logs/<mission>-<time>-<pid>.jsonl)")
+    r.add_argument("--overwrite", action="store_true", help="replace an existing --log file (never a symlink)")
     r.add_argument("--rate", type=float, metavar="HZ", help="tick rate, overrides the config's rate_hz")
     r.add_argument("--request-timeout", type=float, metavar="S", help="halt a request after S clock seconds")
     r.add_argument("--watch", action="store_true", help="reload the mission between requests when it changes")
@@ -391,6 +401,7 @@ def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namesp
     opts = RunOptions(mission=mission, config=config, requests=requests, params=params, argv=list(argv))
     if args is not None:
         opts.seed, opts.log_path, opts.rate_hz = args.seed, args.log, args.rate
+        opts.overwrite = getattr(args, "overwrite", False)
         opts.watch, opts.gui, opts.record = args.watch, args.gui, args.record
         opts.request_timeout = args.request_timeout
         opts.recovery_enabled = not getattr(args, "no_recovery", False)
@@ -449,8 +460,9 @@ def _cmd_demo(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print(f"mmexec demo: {mission.name} on the simulated LoCoBot ({config.name}, lab world, headless), "
               f"{len(DEMO_REQUESTS)} requests")
         reqs = [Request(dict(r), ArgMark("demo request", i, 1)) for i, r in enumerate(DEMO_REQUESTS, start=1)]
+        # the demo's own folder: its previous events.jsonl is replaced (as its video is)
         opts = RunOptions(mission=mission, config=config, requests=reqs, seed=0, log_path=log_path,
-                          record=video, argv=list(argv))
+                          overwrite=True, record=video, argv=list(argv))
         _preload_pybullet_quietly()
         runner = Runner(opts)
         runner.prepare()
@@ -574,7 +586,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     _CURRENT_LOG[0] = None
     try:
         code = _dispatch(args)
-        sys.stdout.flush()  # a reader that went away (`| head`) shows up here, not at exit
+        try:
+            sys.stdout.flush()  # a reader that went away (`| head`) shows up here, not at exit
+        except OSError:
+            if code <= 128:
+                raise
+            detach_stdout()  # a run ended by a signal (SIGHUP: the terminal hung up, EIO) says so
         return code
     except BrokenPipeError:  # stdout's reader went away (`| head`): exit quietly
         return detach_stdout()

@@ -22,24 +22,45 @@ the robot). Record types written by the runner:
                         succeeded, failed, duration [clock s], exit_code
 ======================  ===================================================================
 
-Each record is written with one ``write`` call on a line-buffered file and then flushed,
-so a crash or Ctrl-C loses at most the record being written; :func:`read_log` skips a
+Each record is one line handed to the kernel with ``os.write`` (no user-space buffer),
+so a crash or a signal loses at most the record being written; :func:`read_log` skips a
 truncated last line.
+
+A log is never shared or silently replaced: :meth:`EventLog.open` creates the file
+exclusively (``O_EXCL``; with ``overwrite`` an existing regular file is truncated, but
+only once its lock is held), never follows a symbolic link (``O_NOFOLLOW``), refuses
+anything but a regular file, and holds an exclusive ``flock`` until :meth:`EventLog.close`,
+so a second writer is refused (:class:`LogInUseError`). A write that fails (a full disk:
+``ENOSPC``; a file size limit: ``EFBIG``) cuts the file back to its last complete record,
+so every line stays valid JSON; the log then stops writing (:attr:`EventLog.error` holds
+the error, later records are only counted in :attr:`EventLog.dropped`) and its owner
+decides what to do (the runner stops the robot and ends the run).
 """
 
 from __future__ import annotations
 
 import enum
+import errno
+import fcntl
 import json
 import logging
 import math
 import os
+import stat
 from collections.abc import Callable, Iterator
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import IO, Any, Self
+from typing import Any, Self
 
-__all__ = ["EventLog", "LogFormatError", "read_log", "to_jsonable"]
+__all__ = [
+    "EventLog",
+    "LogExistsError",
+    "LogFormatError",
+    "LogInUseError",
+    "LogOpenError",
+    "read_log",
+    "to_jsonable",
+]
 
 log = logging.getLogger(__name__)
 
@@ -71,33 +92,113 @@ def to_jsonable(value: Any) -> Any:
     return str(value)
 
 
+class LogOpenError(Exception):
+    """The event log file cannot be opened for this run: ``str(e)`` is ``PATH: reason``,
+    one line; :attr:`path`, :attr:`reason` and :attr:`errno` (None when no system call
+    failed) separately."""
+
+    def __init__(self, path: Path, reason: str, err: int | None = None) -> None:
+        super().__init__(f"{path}: {reason}")
+        self.path = path
+        self.reason = reason
+        self.errno = err
+
+
+class LogExistsError(LogOpenError):
+    """The path already exists and replacing it was not asked for (``overwrite``)."""
+
+
+class LogInUseError(LogOpenError):
+    """Another process holds the lock of this log (it is writing it)."""
+
+
+def _open_exclusive(path: Path, *, overwrite: bool) -> int:
+    """Open ``path`` for writing a new log: a file descriptor holding an exclusive
+    ``flock``, at offset 0 of an empty regular file. Raises :class:`LogOpenError`."""
+    parent = path.parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise LogOpenError(path, f"cannot create its folder {parent}: {e.strerror or e}", e.errno) from None
+    # O_NONBLOCK: opening a FIFO must not wait for a reader (it is refused below)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+    if not overwrite:
+        flags |= os.O_EXCL  # also refuses a symlink, dangling or not, without following it
+    try:
+        fd = os.open(path, flags, 0o644)
+    except FileExistsError:
+        if path.is_symlink():
+            raise LogOpenError(path, "is a symbolic link (an event log is never written through one)",
+                               errno.EEXIST) from None
+        if path.is_dir():
+            raise LogOpenError(path, "is a directory, expected an event log file", errno.EISDIR) from None
+        if not path.is_file():
+            raise LogOpenError(path, "is not a regular file", errno.EEXIST) from None
+        raise LogExistsError(path, "already exists", errno.EEXIST) from None
+    except IsADirectoryError:
+        raise LogOpenError(path, "is a directory, expected an event log file", errno.EISDIR) from None
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise LogOpenError(path, "is a symbolic link (an event log is never written through one)",
+                               e.errno) from None
+        if e.errno == errno.ENXIO:  # a FIFO nobody reads
+            raise LogOpenError(path, "is not a regular file", e.errno) from None
+        raise LogOpenError(path, f"cannot open for writing: {e.strerror or e}", e.errno) from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise LogOpenError(path, "is not a regular file")
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise LogInUseError(path, "is in use: another process holds its lock (another run writing it?)",
+                                errno.EWOULDBLOCK) from None
+        os.ftruncate(fd, 0)  # only now: a log in use by another writer is left untouched
+        os.set_blocking(fd, True)
+    except LogOpenError:
+        os.close(fd)
+        raise
+    except OSError as e:
+        os.close(fd)
+        raise LogOpenError(path, f"cannot prepare for writing: {e.strerror or e}", e.errno) from None
+    return fd
+
+
 class EventLog:
     """Append-only JSON-lines writer.
 
     ``clock`` (a callable returning clock seconds) stamps each record with ``t`` unless
     the record has one. ``path=None`` keeps records only in :attr:`records` (tests,
     ``mmexec validate``). Every record is also kept in memory when ``keep`` is True.
-    Use as a context manager or call :meth:`close`.
+    ``overwrite``: replace an existing regular file (never a symlink, never a log another
+    process holds). Use as a context manager or call :meth:`close`.
+
+    Writing never raises: the first failed write is kept in :attr:`error` (the file is cut
+    back to its last complete record) and later records are not written but counted in
+    :attr:`dropped`; listeners and :attr:`records` still get every record.
     """
 
     def __init__(self, path: str | Path | None, *, clock: Callable[[], float] | None = None,
-                 keep: bool = False) -> None:
+                 keep: bool = False, overwrite: bool = False) -> None:
         self.path = Path(path) if path is not None else None
         self.clock = clock
         self.keep = keep or path is None
+        self.overwrite = overwrite
         self.records: list[dict[str, Any]] = []
-        self._fh: IO[str] | None = None
+        #: the OSError of the first failed write (or final fsync); None while all is well
+        self.error: OSError | None = None
+        #: records not written because of :attr:`error`
+        self.dropped = 0
+        self._fd: int | None = None
+        self._size = 0  # bytes of complete records in the file
         self._seq = 0
         self._listeners: list[Callable[[dict[str, Any]], None]] = []
 
     def open(self) -> Self:
-        """Create (truncate) the file. Raises OSError if it cannot be created."""
-        if self.path is not None and self._fh is None:
-            if self.path.parent and not self.path.parent.exists():
-                self.path.parent.mkdir(parents=True, exist_ok=True)
-            # line-buffered; the handle lives as long as this log (closed by close()/__exit__),
-            # so it cannot be a with block here: EventLog itself is the context manager
-            self._fh = open(self.path, "w", encoding="utf-8", buffering=1)  # noqa: SIM115
+        """Create the file (see the module doc), creating missing parent folders.
+        Raises :class:`LogOpenError` (:class:`LogExistsError`, :class:`LogInUseError`)."""
+        if self.path is not None and self._fd is None:
+            self._fd = _open_exclusive(self.path, overwrite=self.overwrite)
+            self._size = 0
         return self
 
     def __enter__(self) -> Self:
@@ -108,23 +209,23 @@ class EventLog:
 
     @property
     def closed(self) -> bool:
-        return self._fh is None
+        return self._fd is None
 
     def add_listener(self, fn: Callable[[dict[str, Any]], None]) -> None:
         """Call ``fn(record)`` after each record is written (e.g. live counters)."""
         self._listeners.append(fn)
 
     def write(self, event: str, **fields: Any) -> dict[str, Any]:
-        """Write one record and flush it. Returns the record as written."""
+        """Write one record (one line, handed to the kernel at once). Returns the record.
+        Never raises for I/O: see :attr:`error`."""
         record: dict[str, Any] = {"event": event, "seq": self._seq}
         if "t" not in fields and self.clock is not None:
             record["t"] = self.clock()
         record.update(fields)
         record = to_jsonable(record)
         self._seq += 1
-        if self._fh is not None:
-            self._fh.write(json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n")
-            self._fh.flush()
+        if self._fd is not None:
+            self._append((json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n").encode("utf-8"))
         if self.keep:
             self.records.append(record)
         for fn in self._listeners:
@@ -135,20 +236,56 @@ class EventLog:
         """:class:`~mmexec.executive.context.ExecContext` event sink (same as :meth:`write`)."""
         self.write(event, **fields)
 
+    @staticmethod
+    def _write_some(fd: int, data: bytes) -> int:
+        """One ``write(2)``: the number of bytes the kernel took (tests inject faults here)."""
+        return os.write(fd, data)
+
+    def _append(self, line: bytes) -> None:
+        assert self._fd is not None
+        if self.error is not None:
+            self.dropped += 1
+            return
+        view = memoryview(line)
+        try:
+            while view:
+                n = self._write_some(self._fd, view)
+                if n <= 0:
+                    raise OSError(errno.EIO, "write(2) took no bytes")
+                view = view[n:]
+        except OSError as e:
+            self._failed(e)
+            return
+        self._size += len(line)
+
+    def _failed(self, e: OSError) -> None:
+        """Keep the first write error; cut a partly written record off the file."""
+        self.error = e
+        self.dropped += 1
+        assert self._fd is not None
+        try:
+            os.ftruncate(self._fd, self._size)  # frees space, so it works on a full disk too
+        except OSError as te:  # the reader still skips a truncated last line
+            log.warning("%s: could not remove a partly written record: %s", self.path, te)
+        log.debug("%s: write failed after %d bytes: %s", self.path, self._size, e)
+
     def sync(self) -> None:
-        """Flush and fsync (the runner calls this at the end of a run and on interrupt)."""
-        if self._fh is not None:
-            self._fh.flush()
+        """fsync the file (the runner calls this at the end of a run); an error is kept in
+        :attr:`error` like a failed write."""
+        if self._fd is not None:
             try:
-                os.fsync(self._fh.fileno())
-            except OSError as e:  # e.g. a pipe or /dev/stdout: flushing is all there is
-                log.debug("fsync of %s not possible: %s", self.path, e)
+                os.fsync(self._fd)
+            except OSError as e:
+                if self.error is None:
+                    self.error = e
+                log.warning("%s: fsync failed: %s", self.path, e)
 
     def close(self) -> None:
-        if self._fh is not None:
+        """fsync, release the lock and close. Idempotent."""
+        if self._fd is not None:
             self.sync()
-            self._fh.close()
-            self._fh = None
+            fd, self._fd = self._fd, None
+            os.close(fd)  # releases the flock
 
     @staticmethod
     def wall_time() -> str:

@@ -5,22 +5,35 @@ For each request the runner instantiates a fresh tree from the mission, ticks it
 physics, the robot sleeps to the period boundary, the mock advances its clock) until it
 succeeds or fails, and records everything in the event log. A failed or given-up request
 does not stop the queue. The runner itself never sleeps and never reads the wall clock
-for timing, except to bound how long a Ctrl-C stop may take.
+for timing, except to bound how long a signalled stop may take.
 
-Stopping: :meth:`Runner.interrupt` (the SIGINT handler calls it) asks the running tree
-to halt; the runner keeps ticking until the tree has stopped (every running skill
+Stopping (the safety contract): SIGINT (Ctrl-C), SIGTERM (``timeout``, systemd,
+``docker stop``) and SIGHUP (a closed ssh session) all call :meth:`Runner.interrupt`
+(from :meth:`Runner.run`'s handlers, installed in the main thread; a signal the process
+inherited as ignored, e.g. SIGHUP under ``nohup``, stays ignored). The running tree is
+asked to halt; the runner keeps ticking until it has stopped (every running skill
 cancelled, the hardware left safe), bounded by :attr:`RunOptions.halt_wall_limit`
-seconds of wall time, after which it calls ``robot.safe_stop()``. A second Ctrl-C skips
-the wait. Then it closes the robot, writes ``run_end`` and returns exit code 130.
+seconds of wall time, after which it calls ``robot.safe_stop()``. A second signal skips
+the wait. Then it closes the robot (which stops it again), writes ``request_end`` and
+``run_end`` and returns 128 + the signal number: 130 (SIGINT), 143 (SIGTERM), 129 (SIGHUP).
+On a wall clock the wait between ticks (``robot.spin``) is cut short by the signal, so
+a slow ``rate_hz`` does not delay the halt, and while a signalled tree stops the runner
+ticks at least every :data:`HALT_TICK` seconds.
 
-Exit codes of :meth:`Runner.run`: 0 every request succeeded, 1 any failed, 130
-interrupted. Bad input (config, mission, requests) raises
-:class:`~mmexec.config.yamlload.InputError` from :meth:`Runner.prepare` (the CLI turns it
-into exit code 2).
+A failed event-log write (disk full) ends the run the same way (the tree halted, the
+robot stopped and closed), with one line on ``err`` and exit code 1: a run is never
+left going without its record.
+
+Exit codes of :meth:`Runner.run`: 0 every request succeeded, 1 any failed (or the log
+failed), 128 + signal interrupted. Bad input (config, mission, requests, an event log
+path that exists or cannot be created) raises
+:class:`~mmexec.config.yamlload.InputError` from :meth:`Runner.prepare` or
+:meth:`Runner.run` (the CLI turns it into exit code 2).
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import logging
 import os
@@ -32,6 +45,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
 from typing import Any, TextIO
@@ -41,7 +55,7 @@ import py_trees
 from mmexec.config.yamlload import InputError, Mark, Problem, read_file
 from mmexec.drivers.interfaces import Robot
 from mmexec.executive.config import LoadedConfig, build_robot, load_config, load_skill_modules
-from mmexec.executive.eventlog import EventLog
+from mmexec.executive.eventlog import EventLog, LogExistsError, LogOpenError
 from mmexec.executive.textsafe import printable
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
@@ -50,6 +64,8 @@ __all__ = [
     "EXIT_INPUT",
     "EXIT_INTERRUPTED",
     "EXIT_OK",
+    "HALT_SIGNALS",
+    "HALT_TICK",
     "ArgMark",
     "BackendStartError",
     "Progress",
@@ -65,7 +81,14 @@ log = logging.getLogger(__name__)
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_INPUT = 2
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = 130  # SIGINT; any halting signal exits 128 + its number
+
+#: Signals that halt a run (the safety contract in the module doc).
+HALT_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: [wall s] longest wait between ticks while a signalled tree stops on a wall clock.
+HALT_TICK = 0.05
+#: default log names tried (``-1``, ``-2``, ...) when one is taken
+_DEFAULT_LOG_ATTEMPTS = 100
 
 Status = py_trees.common.Status
 
@@ -84,6 +107,11 @@ class BackendStartError(RuntimeError):
     """The configured backend could not be built or connected (not an input error)."""
 
 
+class _Wake(BaseException):
+    """Raised by the runner's signal handlers inside :meth:`Runner._spin` only, to end
+    the wait between ticks at once (a BaseException so no skill code can catch it)."""
+
+
 @dataclass(frozen=True)
 class Request:
     """One request: its fields (strings from the command line, typed values from a
@@ -99,7 +127,8 @@ class RunOptions:
 
     ``rate_hz`` overrides the config's tick rate; ``request_timeout`` [clock s] halts a
     request that runs longer (outcome ``timeout``); ``halt_wall_limit`` [wall s] bounds
-    how long a Ctrl-C stop may take before ``robot.safe_stop()``.
+    how long a signalled stop may take before ``robot.safe_stop()``; ``overwrite``
+    replaces an existing ``log_path`` (otherwise an existing path is an input error).
     """
 
     mission: Path
@@ -108,6 +137,7 @@ class RunOptions:
     params: dict[str, Any] = field(default_factory=dict)
     seed: int | None = None
     log_path: Path | None = None
+    overwrite: bool = False
     rate_hz: float | None = None
     watch: bool = False
     gui: bool = False
@@ -138,10 +168,28 @@ class RequestResult:
         return self.outcome == "success"
 
 
-def default_log_path(mission: Path) -> Path:
-    """``mmexec-logs/<mission stem>-<UTC date-time>.jsonl`` under the current directory."""
-    stamp = EventLog.wall_time().replace(":", "").replace("-", "").replace("+0000", "Z").replace("+00:00", "Z")
-    return Path("mmexec-logs") / f"{mission.stem}-{stamp}.jsonl"
+def default_log_path(mission: Path, attempt: int = 0) -> Path:
+    """``mmexec-logs/<mission stem>-<UTC date-time to the ms>-<pid>.jsonl`` under the
+    current directory, e.g. ``fetch_item-20250301T141503.042Z-81234.jsonl``: two runs
+    started in the same millisecond are different processes. ``attempt`` N > 0 appends
+    ``-N`` (the runner's next try when one process starts two runs in one millisecond)."""
+    now = datetime.now(UTC)
+    stamp = f"{now:%Y%m%dT%H%M%S}.{now.microsecond // 1000:03d}Z"
+    suffix = f"-{attempt}" if attempt else ""
+    return Path("mmexec-logs") / f"{mission.stem}-{stamp}-{os.getpid()}{suffix}.jsonl"
+
+
+def _describe(e: OSError) -> str:
+    """``No space left on device (ENOSPC)`` for an OSError with an errno."""
+    name = errno.errorcode.get(e.errno or 0, "")
+    return f"{e.strerror or e}" + (f" ({name})" if name else "")
+
+
+def _signal_name(signum: int) -> str:
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        return f"signal {signum}"
 
 
 def _versions() -> dict[str, str]:
@@ -186,15 +234,23 @@ class Progress:
         text = printable(text)  # node paths come from user files
         if len(text) >= width:
             text = text[: max(10, width - 2)] + "…"
-        self.stream.write("\r" + text + "\x1b[K")
-        self.stream.flush()
-        self._shown = True
+        self._shown = self._draw("\r" + text + "\x1b[K")
 
     def clear(self) -> None:
         if self.enabled and self._shown:
-            self.stream.write("\r\x1b[K")
+            self._shown = not self._draw("\r\x1b[K")
+
+    def _draw(self, text: str) -> bool:
+        """Write ``text``; a terminal that went away (a closed ssh session) turns the
+        status line off instead of ending the run. Returns whether it was drawn."""
+        try:
+            self.stream.write(text)
             self.stream.flush()
-            self._shown = False
+        except OSError as e:
+            log.debug("status line off: %s", e)
+            self.enabled = False
+            return False
+        return True
 
 
 class Runner:
@@ -230,7 +286,11 @@ class Runner:
         self.log_path: Path | None = None
         self._requests: list[dict[str, Any]] = []
         self._interrupts = 0
-        self._lock = threading.Lock()
+        #: the first halting signal received (SIGINT for :meth:`interrupt` without one)
+        self.signal: int | None = None
+        self._waiting = False  # in the wait between ticks, where a signal may end it
+        self._dead_streams: set[int] = set()  # id() of consoles that went away
+        self._lock = threading.RLock()  # reentrant: the signal handler runs in the main thread
         self._mission_digest = ""
         self._rejected_digest = ""
         self._recoveries = 0
@@ -276,39 +336,92 @@ class Runner:
 
     # ------------------------------------------------------------------ control
 
-    def interrupt(self) -> None:
-        """Ask the run to stop (SIGINT handler; safe from a signal or another thread).
-        The first call halts the running tree; a second one stops waiting for it."""
+    def interrupt(self, signum: int = signal.SIGINT) -> None:
+        """Ask the run to stop (the signal handlers call it; safe from a signal or another
+        thread). The first call halts the running tree and fixes the exit code at 128 +
+        ``signum``; a second one stops waiting for the tree."""
         with self._lock:
             self._interrupts += 1
+            if self.signal is None:
+                self.signal = int(signum)
 
     @property
     def interrupted(self) -> bool:
         return self._interrupts > 0
 
-    def _install_sigint(self) -> Callable[[], None]:
+    def _wake(self) -> None:
+        """End the wait between ticks now, if the main thread is in it (signal context)."""
+        if self._waiting:
+            self._waiting = False
+            raise _Wake
+
+    def _on_halt_signal(self, signum: int, frame: object) -> None:
+        self.interrupt(signum)
+        self._wake()
+
+    def _on_alarm(self, signum: int, frame: object) -> None:
+        self._wake()
+
+    def _install_signals(self, *, alarm: bool = False) -> Callable[[], None]:
+        """Handlers for :data:`HALT_SIGNALS`, or with ``alarm`` for SIGALRM, which only
+        ends a wait (see :meth:`_spin`); returns the function restoring the previous
+        ones. Signals can only be handled in the main thread: elsewhere nothing is done."""
         if threading.current_thread() is not threading.main_thread():
             return lambda: None
-        previous = signal.getsignal(signal.SIGINT)
+        previous: dict[int, Any] = {}
+        if alarm:
+            previous[signal.SIGALRM] = signal.signal(signal.SIGALRM, self._on_alarm)
+        else:
+            for sig in HALT_SIGNALS:
+                if signal.getsignal(sig) is signal.SIG_IGN:  # e.g. SIGHUP under nohup: the user's choice
+                    continue
+                previous[sig] = signal.signal(sig, self._on_halt_signal)
 
-        def handler(signum: int, frame: object) -> None:
-            self.interrupt()
+        def restore() -> None:
+            for sig, old in previous.items():
+                signal.signal(sig, old if old is not None else signal.SIG_DFL)
 
-        signal.signal(signal.SIGINT, handler)
-        return lambda: signal.signal(signal.SIGINT, previous)
+        return restore
+
+    def _spin(self, robot: Robot, period: float, seen: int, ending: bool) -> None:
+        """``robot.spin(period)`` between ticks. On a wall clock the wait ends early when a
+        halting signal arrives (one not yet ``seen`` skips it), and, once the run is
+        ``ending`` (a signalled or log-failure halt), after :data:`HALT_TICK` at most, by
+        a SIGALRM. On a stepped clock the spin costs no wall time and runs in full."""
+        if robot.clock.stepped or threading.current_thread() is not threading.main_thread():
+            robot.spin(period)
+            return
+        timer = ending and period > HALT_TICK
+        try:
+            try:
+                self._waiting = True  # from here on a signal raises _Wake: no window is lost
+                if self._interrupts > seen:
+                    return
+                if timer:
+                    signal.setitimer(signal.ITIMER_REAL, HALT_TICK)
+                robot.spin(period)
+            finally:
+                self._waiting = False  # a _Wake can come up to here, and is caught just below
+        except _Wake:
+            log.debug("wait between ticks cut short")
+        finally:
+            if timer:
+                signal.setitimer(signal.ITIMER_REAL, 0.0)
 
     # ------------------------------------------------------------------ run
 
     def run(self) -> int:
-        """Serve every request; returns the exit code (0, 1 or 130). Call
-        :meth:`prepare` first. Backend start-up errors propagate (after closing the log)."""
+        """Serve every request; returns the exit code (0, 1, or 128 + the halting signal's
+        number). Call :meth:`prepare` first. An event log path that cannot be used raises
+        InputError before anything starts; backend start-up errors propagate (after
+        closing the log)."""
         if self.mission is None or self.config is None:
             self.prepare()
         assert self.config is not None
         opts = self.options
-        restore = self._install_sigint()
-        self.log_path = opts.log_path if opts.log_path is not None else default_log_path(opts.mission)
-        self.log = EventLog(self.log_path).open()
+        self.log = self._open_log()
+        restore_alarm: Callable[[], None] = lambda: None
+        restore = self._install_signals()
         exit_code = EXIT_FAILED
         outcome = "error"
         try:
@@ -324,6 +437,8 @@ class Runner:
                 raise BackendStartError(f"backend {self.config.backend!r} failed to start: "
                                         f"{type(e).__name__}: {e}") from e
             robot = self.robot
+            if not robot.clock.stepped:  # the timer that bounds waits while a signalled tree stops
+                restore_alarm = self._install_signals(alarm=True)
             self.log.clock = robot.clock.now
             self.log.add_listener(self._count_events)
             for fn in self._log_listeners:
@@ -353,7 +468,7 @@ class Runner:
                               recovery_enabled=opts.recovery_enabled)
             n = len(self._requests)
             for i in range(n):
-                if self.interrupted:
+                if self.interrupted or self.log.error is not None:
                     break
                 if i > 0 and opts.watch:
                     self._maybe_reload(i)
@@ -362,14 +477,24 @@ class Runner:
                 self._print_result(result, n)
             ok = sum(r.ok for r in self.results)
             failed = len(self.results) - ok
-            if self.interrupted:
-                exit_code, outcome = EXIT_INTERRUPTED, "interrupted"
+            extra: dict[str, Any] = {}
+            if self.log.error is not None:
+                exit_code, outcome = EXIT_FAILED, "error"
+            elif self.interrupted:
+                signum = self.signal if self.signal is not None else signal.SIGINT
+                exit_code, outcome = 128 + signum, "interrupted"
+                extra["signal"] = _signal_name(signum)
             elif failed == 0 and len(self.results) == n:
                 exit_code, outcome = EXIT_OK, "ok"
             else:
                 exit_code, outcome = EXIT_FAILED, "failed"
             self.log.write("run_end", outcome=outcome, requests=n, served=len(self.results), succeeded=ok,
-                           failed=failed, duration=robot.clock.now(), exit_code=exit_code)
+                           failed=failed, duration=robot.clock.now(), exit_code=exit_code, **extra)
+            if self.log.error is not None:  # also a failure of this very last record
+                exit_code = EXIT_FAILED
+                robot.safe_stop()
+                self._say(f"mmexec: event log {self.log_path}: {_describe(self.log.error)}; "
+                          "the robot was stopped and the run ended", self.err)
             self._print_summary(n, ok, failed, outcome)
             return exit_code
         except BaseException as e:
@@ -388,7 +513,30 @@ class Runner:
             finally:
                 if self.log is not None:
                     self.log.close()
+                restore_alarm()
                 restore()
+
+    def _open_log(self) -> EventLog:
+        """The run's event log, open (see :class:`EventLog`), at ``--log`` or a new default
+        path (:attr:`log_path`); a path that cannot be used is an InputError located at it."""
+        opts = self.options
+        attempt = 0
+        while True:
+            path = self.log_path = opts.log_path if opts.log_path is not None else default_log_path(
+                opts.mission, attempt)
+            try:
+                return EventLog(path, overwrite=opts.overwrite).open()
+            except LogExistsError as e:
+                if opts.log_path is None and attempt < _DEFAULT_LOG_ATTEMPTS:
+                    attempt += 1  # this process started another run in the same millisecond
+                    continue
+                raise InputError.at(Mark(str(path), 1, 1), f"{self._log_option()}: {e.reason}; "
+                                                           "pass --overwrite to replace it") from None
+            except LogOpenError as e:
+                raise InputError.at(Mark(str(path), 1, 1), f"{self._log_option()}: {e.reason}") from None
+
+    def _log_option(self) -> str:
+        return "--log" if self.options.log_path is not None else "event log"
 
     def _count_events(self, record: dict[str, Any]) -> None:
         ev = record.get("event")
@@ -400,7 +548,6 @@ class Runner:
             self.progress.clear()
             level = record.get("level", "info")
             self._say(f"  {'' if level == 'info' else level + ': '}{record.get('message', '')}")
-            self.out.flush()
 
     def _serve(self, ctx: Any, index: int, total: int, request: dict[str, Any], period: float) -> RequestResult:
         assert self.robot is not None and self.log is not None
@@ -428,11 +575,17 @@ class Runner:
                         if not tree.halting:
                             tree.request_halt()
                         wall_deadline = time.monotonic() + opts.halt_wall_limit
-                        elog.write("halt", reason="interrupt", index=index)
+                        elog.write("halt", reason="interrupt", signal=_signal_name(self.signal or signal.SIGINT),
+                                   index=index)
                     if seen_interrupts >= 2:
                         elog.write("halt_abandoned", reason="second interrupt", index=index)
                         robot.safe_stop()
                         break
+                elif elog.error is not None and halt_reason not in ("interrupt", "log_failure"):
+                    halt_reason = "log_failure"  # no record can be written any more: stop
+                    if not tree.halting:
+                        tree.request_halt()
+                    wall_deadline = time.monotonic() + opts.halt_wall_limit
                 elif (opts.request_timeout is not None and not halt_reason
                       and robot.clock.now() - t0 > opts.request_timeout):
                     halt_reason = "timeout"
@@ -454,7 +607,7 @@ class Runner:
                         break
                 elif status in (Status.SUCCESS, Status.FAILURE):
                     break
-                robot.spin(period)
+                self._spin(robot, period, seen_interrupts, ending=halt_reason in ("interrupt", "log_failure"))
         except Exception as e:  # a bug in a skill or node: this request ends, the queue goes on
             log.error("request %d: %s", index, e, exc_info=log.isEnabledFor(logging.DEBUG))
             robot.safe_stop()
@@ -463,7 +616,10 @@ class Runner:
             self._end(result)
             return result
         bb = tree.blackboard()
-        if halt_reason == "interrupt":
+        if halt_reason == "log_failure":
+            robot.safe_stop()
+            outcome = "error"
+        elif halt_reason == "interrupt":
             outcome = "interrupted"
         elif halt_reason == "timeout":
             outcome = "timeout"
@@ -473,7 +629,11 @@ class Runner:
         if outcome == "timeout":
             reason, kind = f"request took longer than {opts.request_timeout:g} s", "timeout"
         elif outcome == "interrupted":
-            reason, kind = "interrupted (Ctrl-C)", "cancelled"
+            signum = self.signal if self.signal is not None else signal.SIGINT
+            reason = "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"interrupted ({_signal_name(signum)})"
+            kind = "cancelled"
+        elif outcome == "error":
+            reason = f"event log write failed: {_describe(elog.error)}" if elog.error is not None else ""
         elif outcome == "failure":
             reason = str(bb.get("last_failure", "") or "")
             kind = str(bb.get("last_failure_kind", "") or "")
@@ -550,9 +710,15 @@ class Runner:
         self._say(f"{ok}/{n} requests succeeded, {failed} failed{extra} ({outcome}); log: {self.log_path}")
 
     def _say(self, line: str, stream: TextIO | None = None) -> None:
-        """Write one line of user-facing output (the run's console, not logging), its
-        terminal control characters escaped (report messages, requests and reasons are
-        user text)."""
+        """Write one line of user-facing output (the run's console, not logging). A
+        console that went away (a closed ssh session: EIO; a closed pipe: EPIPE) is
+        written no more; the run goes on and its event log keeps the record."""
         s = stream if stream is not None else self.out
-        s.write(printable(line) + "\n")
-        s.flush()
+        if id(s) in self._dead_streams:
+            return
+        try:
+            s.write(printable(line) + "\n")  # report messages, requests and reasons are user text
+            s.flush()
+        except OSError as e:
+            self._dead_streams.add(id(s))
+            log.debug("console output off: %s", e)
