@@ -14,12 +14,15 @@ the robot). Record types written by the runner:
 ``skill_*`` / ``recovery_*`` / ``report`` ...   events emitted by the tree and skills
                         (``node`` path, ``t``, and event fields)
 ``mission_reload``      ``--watch``: ok, mission sha256, problems (list of lines)
-``halt``                why the runner halted the tree (``interrupt``, ``timeout``)
+``halt``                why the runner halted the tree (``interrupt``, ``timeout``); for an
+                        interrupt the ``signal`` (``SIGINT``, ``SIGTERM``, ``SIGHUP``)
+``halt_abandoned``      the tree was still stopping: reason (a second signal, the wall limit)
 ``request_end``         index, outcome (``success``, ``failure``, ``timeout``,
-                        ``interrupted``), duration [clock s], recoveries, attempts,
-                        reason, failure_kind, failure_node
+                        ``interrupted``, ``error``), duration [clock s], recoveries,
+                        attempts, reason, failure_kind, failure_node
 ``run_end``             outcome (``ok``, ``failed``, ``interrupted``, ``error``), requests,
-                        succeeded, failed, duration [clock s], exit_code
+                        succeeded, failed, duration [clock s], exit_code; ``signal`` when
+                        a signal ended the run
 ======================  ===================================================================
 
 Each record is one line handed to the kernel with ``os.write`` (no user-space buffer),
