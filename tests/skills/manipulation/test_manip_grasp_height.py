@@ -48,5 +48,12 @@ def test_profile_grasp_height_and_refine_at_are_checked() -> None:
     assert FetchProfile(depot=depot).refine_at == 0.8
     bad = FetchProfile(depot=depot, grasp_height=0.04).validate()
     assert any("grasp_height" in m for m in bad)
-    assert any("refine_at" in m for m in FetchProfile(depot=depot, refine_at=0.0).validate())
+    # refine_at > 0 is a declared range of the profile schema, checked where the value is written
+    from mmexec.config.yamlload import Problems, load_yaml_text
+    from mmexec.skills.profile import PROFILE
+
+    raw = load_yaml_text("depot: {base: [0, 0, 0], place: [0, 0, 0.3]}\nrefine_at: 0.0\n", "c.yaml")
+    problems = Problems()
+    assert PROFILE.bind_section("fetch", raw, raw.mark, problems) is None
+    assert [str(p) for p in problems] == ["c.yaml:2:12: profile.fetch.refine_at: expected > 0 m, got 0.0"]
     assert FetchProfile(depot=depot, grasp_height=0.016).validate() == []
