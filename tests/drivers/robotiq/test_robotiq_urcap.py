@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import socket
-import time
 from collections.abc import Iterator
 
 import pytest
@@ -113,10 +112,9 @@ def test_silent_controller_times_out(server: FakeURCap) -> None:
         server.model.time_scale = 1.0
         goal = g.close(speed=0.02)
         server.silent = True
-        t0 = time.monotonic()
         assert finish(goal, 1.5) is GoalState.FAILED
-        assert time.monotonic() - t0 < 1.0
         assert "no answer within the deadline (100 ms)" in goal.reason
+        assert "(3 tries)" in goal.reason
     finally:
         g.disconnect()
     server.silent = True
