@@ -15,6 +15,8 @@ Section schema (every device optional; see docs/drivers/bringup.md)::
                 pose_in_base: {xyz: [..], rpy: [..]}, mount_link: base_link | tool0}
                # ...CameraConfig keys (docs/drivers/camera.md); mount_link tool0 = wrist
                # camera on a UR arm, pose_in_base then being T_tool0_camera
+      lidar:   {kind: rplidar, port: /dev/rplidar, pose_in_base: {xyz: [..], rpy: [..]},
+                ...RplidarConfig keys}                        # pose of the CCW scan frame
       map:     {yaml: maps/lab.yaml}                           # map_server YAML + PGM
       scene:   [{name: shelf, size: [x, y, z], xyz: [..], rpy: [..]}]   # static boxes in map
 
@@ -22,7 +24,7 @@ Two phases, as everywhere in mmexec: the whole section is bound and checked firs
 (every problem reported as ``FILE:LINE:COL: robot.key: message``), then devices are
 constructed lazily by ``kind`` through :data:`DEVICE_KINDS` (driver modules are
 imported only when a config names them) and connected in order base, arm, gripper,
-camera. Before the first device is opened, the driver objects that need an optional
+camera, lidar. Before the first device is opened, the driver objects that need an optional
 extra are constructed (no I/O), so a missing ``pyrealsense2`` fails at once. A device that
 does not answer raises :class:`DeviceUnavailable`, a one-line error naming the config
 line, the device and its port, after closing what was opened.
@@ -463,6 +465,52 @@ def _ur_tool0_in_base(robot: RealRobot, model: str) -> np.ndarray:
     return arm.mount @ urmodel.T_BASELINK_BASE @ urmodel.forward_kinematics(q, model)
 
 
+@dataclass(frozen=True)
+class _PoseInBase:
+    """A frame's pose in ``base_link``: ``xyz`` [m], ``rpy`` [rad] (R = Rz Ry Rx)."""
+
+    xyz: tuple[float, float, float]
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class _LidarMount:
+    """Lidar key next to the driver's config keys: ``pose_in_base``, the pose of the lidar
+    frame (CCW scan angles, angle 0 along its +x) in ``base_link``. Required: a wrong
+    mount misplaces every obstacle the lidar sees."""
+
+    pose_in_base: _PoseInBase
+
+
+def _rplidar(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+    """``rplidar``: a Slamtec RPLIDAR A2 on a serial port; the
+    :class:`~mmexec.drivers.rplidar.device.RplidarConfig` keys plus ``pose_in_base``.
+    Brought up scanning (motor on); closing stops the scan and the motor."""
+    from mmexec.drivers.rplidar.device import RplidarConfig, RplidarDevice, RplidarError
+    from mmexec.drivers.rplidar.lidar import RplidarLidar
+
+    cfg_part, mount_part = _split(_without(section, "kind"), RplidarConfig, _LidarMount)
+    cfg = bind(RplidarConfig, cfg_part, section.mark, path, ctx.problems)
+    mount = bind(_LidarMount, mount_part, section.mark, path, ctx.problems)
+    if cfg is None or mount is None:
+        return None
+    T_base_lidar = pose_matrix(mount.pose_in_base.xyz, mount.pose_in_base.rpy)
+    where = f"rplidar on {cfg.port}"
+
+    def connect() -> RplidarLidar:
+        dev = RplidarDevice(cfg, ctx.robot.clock)
+        try:
+            dev.connect()
+            dev.start()
+        except RplidarError as e:
+            dev.close()
+            raise _connect_error(path, section.mark, str(e)) from e
+        ctx.robot.add_closer(where, dev.close)
+        return RplidarLidar(dev, T_base_lidar)
+
+    return ("lidar", where, section.mark, connect)
+
+
 #: slot -> kind -> factory (import of the driver module happens inside the factory)
 DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
     "base": {"kobuki": _kobuki},
@@ -476,9 +524,10 @@ DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
         "uvc": functools.partial(_camera, kind="uvc"),
         "realsense": functools.partial(_camera, kind="realsense"),
     },
+    "lidar": {"rplidar": _rplidar},
 }
 
-_TOP_KEYS = ("name", "base", "arm", "gripper", "camera", "map", "scene")
+_TOP_KEYS = ("name", "base", "arm", "gripper", "camera", "lidar", "map", "scene")
 
 
 # --------------------------------------------------------------------------- build
@@ -528,7 +577,7 @@ def check_navigation(section: YDict | None) -> tuple[OccupancyGrid | None, float
 def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot, list[_Plan], _Ctx]:
     if section is None or not isinstance(section, YDict):
         mark = getattr(section, "mark", Mark("<config>", 1, 1))
-        raise InputError.at(mark, "robot: missing section (expected a mapping with base / arm / gripper / camera)")
+        raise InputError.at(mark, "robot: missing section (expected a mapping with base / arm / gripper / camera / lidar)")
     problems = Problems()
     for key in section:
         if key not in _TOP_KEYS:
@@ -541,7 +590,7 @@ def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot,
     robot = RealRobot(name, profile)
     ctx = _Ctx(robot, problems)
     plans: list[_Plan] = []
-    for slot in ("base", "arm", "gripper", "camera"):
+    for slot in ("base", "arm", "gripper", "camera", "lidar"):
         if slot not in section:
             continue
         sub, path = section[slot], f"robot.{slot}"

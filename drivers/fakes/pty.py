@@ -25,12 +25,15 @@ from __future__ import annotations
 import logging
 import os
 import select
+import signal
 import threading
 import time
 import tty
+from collections.abc import Callable
+from types import FrameType
 from typing import Self
 
-__all__ = ["PtyDevice"]
+__all__ = ["PtyDevice", "serve_until_signal"]
 
 log = logging.getLogger(__name__)
 
@@ -171,3 +174,24 @@ class PtyDevice:
                             self.on_tick(now)
                         except Exception:
                             log.exception("%s: on_tick failed", self.name)
+
+
+def serve_until_signal(device: PtyDevice, announce: Callable[[str], None]) -> None:
+    """Start ``device``, hand its port to ``announce`` and serve until SIGINT or SIGTERM
+    (``mmexec hw fake``); then stop it and restore the previous handlers. Main thread only
+    (Python sets signal handlers there)."""
+    done = threading.Event()
+
+    def _on_signal(signum: int, frame: FrameType | None) -> None:
+        done.set()
+
+    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        device.start()
+        announce(device.port)
+        while not done.wait(0.5):
+            pass
+    finally:
+        device.stop()
+        for s, handler in old.items():
+            signal.signal(s, handler)

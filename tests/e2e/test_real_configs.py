@@ -77,7 +77,8 @@ def test_section_plans_every_device_and_loads_the_lab_map_and_scene(repo_root: P
     loaded = load_config(repo_root / config)
     section = loaded.section()
     devices = robot_backend.check(section, profile=loaded.config.profile)   # opens nothing
-    assert [d.split(":")[0] for d in devices] == ["base", "arm", "gripper", "camera"]
+    lidar = ["lidar"] if config == "config/locobot.yaml" else []   # the LoCoBot's RPLIDAR
+    assert [d.split(":")[0] for d in devices] == ["base", "arm", "gripper", "camera", *lidar]
     assert section["map"]["yaml"] == "maps/lab.yaml"   # relative to the config file
     robot = robot_backend.build(_map_and_scene_only(section), profile=loaded.config.profile, seed=None, options={})
     try:
