@@ -6,6 +6,7 @@
     mmexec hw ping dynamixel --port PORT [--baud B] [--ids 1-9]
     mmexec hw ping robotiq --port PORT [--activate]
     mmexec hw ping ur --host HOST
+    mmexec hw ping rplidar --port PORT [--duration 2]
     mmexec hw fake DEVICE [options]      # start a protocol fake, print its port
 
 Each device package provides ``mmexec.drivers.<device>.bringup`` with
@@ -37,6 +38,7 @@ DEVICES: dict[str, str] = {
     "dynamixel": "Dynamixel 2.0 bus (Interbotix WX250s arm)",
     "robotiq": "Robotiq 2F-85 gripper over Modbus RTU",
     "ur": "Universal Robots e-series arm over RTDE",
+    "rplidar": "Slamtec RPLIDAR A2 360 degree lidar (LoCoBot) on a serial port",
 }
 
 _USAGE = (
