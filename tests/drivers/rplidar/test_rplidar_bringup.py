@@ -37,7 +37,8 @@ def test_ping_a_ready_lidar_prints_identity_and_measured_scans(
                            "serial 101112131415161718191A1B1C1D1E1F, health good, ")
     m = re.search(r", ([\d.]+) Hz, (\d+) points/rev, motor PWM 660$", line)
     assert m, line
-    assert 7.0 < float(m.group(1)) < 13.0 and 180 <= int(m.group(2)) <= 220   # fake: 10 Hz, 2000 samples/s
+    # the fake: 10 Hz of wall time (a loose bound, arrival times jitter), 2000 samples/s
+    assert 5.0 < float(m.group(1)) < 20.0 and 198 <= int(m.group(2)) <= 202
     # stopped on exit (the fake reads in its own thread: a bounded wait for what it saw)
     assert wait_until(lambda: not fake.motor_running and fake.snapshot().stops >= 2, 1.0)
 

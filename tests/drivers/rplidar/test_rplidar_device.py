@@ -149,8 +149,9 @@ def test_stop_then_start_again(scanning: RplidarDevice, fake: RplidarFake, wait_
 def test_stats_measure_rate_and_points(scanning: RplidarDevice, wait_until: Waiter) -> None:
     assert wait_until(lambda: scanning.stats().scans >= 6)
     st = scanning.stats(window=1.0)
-    assert st.scan_rate is not None and 7.0 < st.scan_rate < 13.0           # the fake turns at 10 Hz
-    assert st.points_per_scan is not None and 190 <= st.points_per_scan <= 210   # 2000 samples/s
+    # the fake turns at 10 Hz of wall time: a loose bound (arrival times jitter under load)
+    assert st.scan_rate is not None and 5.0 < st.scan_rate < 20.0
+    assert st.points_per_scan == pytest.approx(200, abs=2)   # 2000 samples/s at 10 Hz
     assert st.rejected <= 1 and st.corrupt_bytes == 0
 
 
@@ -241,8 +242,9 @@ def test_every_stream_fault_trips_the_watchdog_and_clears(
     assert wait_until(lambda: scanning.fault is not None, deadline + 3.0)
     fault = scanning.fault
     assert isinstance(fault, RplidarWatchdog) and fault.cause is cause, fault
-    # what the device saw: the fault was raised at (not long after) the watchdog deadline
-    assert deadline <= fault.seconds < deadline + 1.0
+    # what the device saw: the fault was raised at the watchdog deadline (generous upper
+    # bound: the reader thread and this poll may be scheduled late on a loaded machine)
+    assert deadline <= fault.seconds < deadline + 2.0
     assert str(fault).startswith(f"rplidar on {fake.port}: no complete scan for ")
     assert scanning.latest_scan() is None and lidar.scan() is None and lidar.fault is fault
     setattr(fake, switch, type(value)())   # False / 0.0: the fault goes away
