@@ -30,6 +30,7 @@ from typing import Any, Self
 import numpy as np
 
 __all__ = [
+    "BLIND_FAULTS",
     "Arm",
     "Base",
     "BaseState",
@@ -254,6 +255,12 @@ class Pose2D:
 
     def distance_to(self, other: Pose2D) -> float:
         return math.hypot(other.x - self.x, other.y - self.y)
+
+
+#: Base faults after which the reported velocity is no measurement (the link to the base is
+#: gone or its driver failed): a skill braking the base commands zero and does not wait to
+#: see it at rest, since it cannot see it (the driver keeps sending stops on its own).
+BLIND_FAULTS: frozenset[str] = frozenset({"link_lost", "driver_error"})
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import math
 import multiprocessing
 import os
 import random
@@ -56,7 +57,8 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
-from mmexec.executive.runner import ArgMark, Progress
+from mmexec.executive.runner import SEED_RANGE, ArgMark, Progress
+from mmexec.executive.values import MAX_SECONDS
 
 __all__ = [
     "FAULT_PROFILES",
@@ -567,9 +569,13 @@ class Campaign:
             raise InputError.at(ArgMark("--trials", 0, 0), f"expected at least 1 trial, got {o.trials}")
         if o.workers is not None and o.workers < 1:
             raise InputError.at(ArgMark("--workers", 0, 0), f"expected at least 1 worker, got {o.workers}")
+        lo, hi = SEED_RANGE
+        if not lo <= o.seed <= hi:
+            raise InputError.at(ArgMark("--seed", 0, 0), f"expected an integer in {lo}..{hi}, got {o.seed}")
         for name, value in (("--request-timeout", o.request_timeout), ("--trial-timeout", o.trial_timeout)):
-            if value is not None and value <= 0:
-                raise InputError.at(ArgMark(name, 0, 0), f"expected seconds > 0, got {value:g}")
+            # NaN and inf too: a NaN timeout never fires, an infinite one is no timeout
+            if value is not None and not (math.isfinite(value) and 0 < value <= MAX_SECONDS):
+                raise InputError.at(ArgMark(name, 0, 0), f"expected seconds > 0 and at most {MAX_SECONDS:g}, got {value:g}")
         for other in o.compare:
             if not (other / "summary.json").is_file():
                 raise InputError.at(ArgMark("--compare", 0, 0), f"{other}: no summary.json (not a campaign directory)")

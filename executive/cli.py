@@ -38,7 +38,7 @@ try:  # Ctrl-C while the command is still importing (a tenth of a second) exits 
 
     from mmexec.config.brokenpipe import detach_stdout
     from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
-    from mmexec.executive.runner import ArgMark, BackendStartError
+    from mmexec.executive.runner import SEED_RANGE, ArgMark, BackendStartError
     from mmexec.executive.textsafe import printable
 except KeyboardInterrupt:
     print("mmexec: interrupted", file=sys.stderr)
@@ -359,10 +359,6 @@ def _cmd_show(args: argparse.Namespace) -> int:
             raise InputError.at(Mark(str(path), 1, 1), f"cannot write: {e.strerror or e}") from None
         print(f"wrote {path}")
     return EXIT_OK
-
-
-#: ``--seed`` values: what numpy and pybullet accept as a seed (an unsigned 32-bit integer).
-SEED_RANGE = (0, 2**32 - 1)
 
 
 def _check_run_flags(args: argparse.Namespace) -> None:

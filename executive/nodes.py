@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import py_trees
 from py_trees.common import Status
 
-from mmexec.executive.values import Const, Expr, MissingKey
+from mmexec.executive.values import MAX_SECONDS, Const, Expr, MissingKey
 from mmexec.skills.base import (
     FailureKind,
     SkillContext,
@@ -534,8 +534,10 @@ class Wait(_Leaf):
         except MissingKey as e:
             self._bad = f"wait: blackboard key {e.key!r} is not set"
             return
-        if isinstance(s, bool) or not isinstance(s, (int, float)) or s < 0:
-            self._bad = f"wait: seconds must be a number >= 0, got {s!r}"
+        # A value from the blackboard is checked here as the compiler checks a literal:
+        # NaN (never reached: ``now >= nan`` is False) and inf would wait forever.
+        if isinstance(s, bool) or not isinstance(s, (int, float)) or not 0 <= s <= MAX_SECONDS:
+            self._bad = f"wait: seconds must be a number in 0..{MAX_SECONDS:g}, got {s!r}"
             return
         self.deadline = self.rt.now() + float(s)
 

@@ -54,7 +54,14 @@ import py_trees
 
 from mmexec.config.yamlload import InputError, Mark, Problem, read_file
 from mmexec.drivers.interfaces import Robot
-from mmexec.executive.config import LoadedConfig, build_robot, load_config, load_skill_modules
+from mmexec.executive.config import (
+    MAX_RATE_HZ,
+    MIN_RATE_HZ,
+    LoadedConfig,
+    build_robot,
+    load_config,
+    load_skill_modules,
+)
 from mmexec.executive.eventlog import EventLog, LogExistsError, LogOpenError
 from mmexec.executive.textsafe import printable
 from mmexec.skills.base import REGISTRY, SkillRegistry
@@ -66,6 +73,7 @@ __all__ = [
     "EXIT_OK",
     "HALT_SIGNALS",
     "HALT_TICK",
+    "SEED_RANGE",
     "ArgMark",
     "BackendStartError",
     "Progress",
@@ -91,6 +99,10 @@ HALT_TICK = 0.05
 _DEFAULT_LOG_ATTEMPTS = 100
 
 Status = py_trees.common.Status
+
+
+#: ``--seed`` values: what numpy and pybullet accept as a seed (an unsigned 32-bit integer).
+SEED_RANGE = (0, 2**32 - 1)
 
 
 class ArgMark(Mark):
@@ -296,10 +308,57 @@ class Runner:
         self._recoveries = 0
         self._skill_failures = 0
         self._log_listeners: list[Callable[[dict[str, Any]], None]] = []
+        #: the run's shared skill world (``ExecContext.world``); set entries before :meth:`run`,
+        #: e.g. the operator channel of ``ask_operator`` (:data:`mmexec.skills.operator.OPERATOR_KEY`)
+        self.world: dict[str, Any] = {}
+        self._tick_hooks: list[Callable[[Robot, float], None]] = []
+        self._halt_request = ""  # why the running request is to be halted (see halt_request)
+        self._stop_requested = False
+        self._served = self._succeeded = 0
 
     def add_log_listener(self, fn: Callable[[dict[str, Any]], None]) -> None:
         """Call ``fn(record)`` after each event-log record is written (live displays, tests)."""
         self._log_listeners.append(fn)
+
+    def add_tick_hook(self, fn: Callable[[Robot, float], None]) -> None:
+        """Call ``fn(robot, period)`` in the tick thread before every tick of a request
+        (commands from other threads, live streams, pacing a stepped clock while an
+        operator prompt waits). It must return promptly: the tick loop waits for it."""
+        self._tick_hooks.append(fn)
+
+    def halt_request(self, reason: str) -> None:
+        """Halt the running request (outcome ``cancelled`` with ``reason``); the queue goes
+        on. Safe from another thread; nothing happens between requests."""
+        with self._lock:
+            self._halt_request = reason
+
+    def request_stop(self) -> None:
+        """End the run in order: halt the running request (outcome ``cancelled``), serve no
+        more, close the robot; ``run_end`` outcome ``stopped``, exit code 0. Thread-safe."""
+        with self._lock:
+            self._stop_requested = True
+            if not self._halt_request:
+                self._halt_request = "the service was stopped"
+
+    @property
+    def stop_requested(self) -> bool:
+        return self._stop_requested
+
+    def _next_request(self, served: int) -> tuple[int, dict[str, Any]] | None:
+        """The next request to serve, as (index, fields), or None when there is none left.
+        ``served`` requests were served so far. Here: the validated list, in order."""
+        return (served + 1, self._requests[served]) if served < len(self._requests) else None
+
+    def _total(self) -> int | None:
+        """How many requests the run serves (``of`` in ``request_start``); None: open-ended."""
+        return len(self._requests)
+
+    def _record(self, result: RequestResult, total: int | None) -> None:
+        """Keep the result of a served request and print its line."""
+        self._served += 1
+        self._succeeded += result.ok
+        self.results.append(result)
+        self._print_result(result, total)
 
     # ------------------------------------------------------------------ input
 
@@ -314,8 +373,9 @@ class Runner:
         self.mission = load_mission(opts.mission, registry=self.registry, roots=self._roots())
         self._mission_digest = _file_sha256(self._mission_files())
         self._requests = self._validate_requests(self.mission)
-        if opts.rate_hz is not None and not 0.0 < opts.rate_hz <= 1000.0:
-            raise InputError.at(Mark("--rate", 1, 1), f"tick rate must be in (0, 1000] Hz, got {opts.rate_hz:g}")
+        if opts.rate_hz is not None and not MIN_RATE_HZ <= opts.rate_hz <= MAX_RATE_HZ:  # NaN too
+            raise InputError.at(Mark("--rate", 1, 1),
+                                f"expected a tick rate in [{MIN_RATE_HZ:g}, {MAX_RATE_HZ:g}] Hz, got {opts.rate_hz:g}")
 
     def _validate_requests(self, mission: Any) -> list[dict[str, Any]]:
         reqs = self.options.requests or [Request({}, ArgMark("mmexec run (no --request given)", 0, 0))]
@@ -464,19 +524,20 @@ class Runner:
             from mmexec.executive.context import ExecContext
 
             ctx = ExecContext(robot=robot, clock=robot.clock, registry=self.registry, emit=self.log.emit,
-                              world={}, profile=dict(self.config.config.profile),
+                              world=self.world, profile=dict(self.config.config.profile),
                               recovery_enabled=opts.recovery_enabled)
-            n = len(self._requests)
-            for i in range(n):
-                if self.interrupted or self.log.error is not None:
+            while not (self.interrupted or self._stop_requested or self.log.error is not None):
+                if self._served > 0 and opts.watch:
+                    self._maybe_reload(self._served)
+                nxt = self._next_request(self._served)
+                if nxt is None:
                     break
-                if i > 0 and opts.watch:
-                    self._maybe_reload(i)
-                result = self._serve(ctx, i + 1, n, self._requests[i], 1.0 / rate)
-                self.results.append(result)
-                self._print_result(result, n)
-            ok = sum(r.ok for r in self.results)
-            failed = len(self.results) - ok
+                total = self._total()
+                self._record(self._serve(ctx, nxt[0], total, nxt[1], 1.0 / rate), total)
+            total = self._total()
+            n = total if total is not None else self._served
+            ok = self._succeeded
+            failed = self._served - ok
             extra: dict[str, Any] = {}
             if self.log.error is not None:
                 exit_code, outcome = EXIT_FAILED, "error"
@@ -484,11 +545,13 @@ class Runner:
                 signum = self.signal if self.signal is not None else signal.SIGINT
                 exit_code, outcome = 128 + signum, "interrupted"
                 extra["signal"] = _signal_name(signum)
-            elif failed == 0 and len(self.results) == n:
+            elif self._stop_requested:
+                exit_code, outcome = EXIT_OK, "stopped"
+            elif failed == 0 and self._served == n:
                 exit_code, outcome = EXIT_OK, "ok"
             else:
                 exit_code, outcome = EXIT_FAILED, "failed"
-            self.log.write("run_end", outcome=outcome, requests=n, served=len(self.results), succeeded=ok,
+            self.log.write("run_end", outcome=outcome, requests=n, served=self._served, succeeded=ok,
                            failed=failed, duration=robot.clock.now(), exit_code=exit_code, **extra)
             if self.log.error is not None:  # also a failure of this very last record
                 exit_code = EXIT_FAILED
@@ -503,7 +566,7 @@ class Runner:
                 code = (EXIT_INPUT if isinstance(e, InputError)
                         else EXIT_INTERRUPTED if isinstance(e, KeyboardInterrupt) else EXIT_FAILED)
                 self.log.write("run_end", outcome="error", error=f"{type(e).__name__}: {e}",
-                               served=len(self.results), exit_code=code)
+                               served=self._served, exit_code=code)
             raise
         finally:
             self.progress.clear()
@@ -549,10 +612,14 @@ class Runner:
             level = record.get("level", "info")
             self._say(f"  {'' if level == 'info' else level + ': '}{record.get('message', '')}")
 
-    def _serve(self, ctx: Any, index: int, total: int, request: dict[str, Any], period: float) -> RequestResult:
+    def _serve(self, ctx: Any, index: int, total: int | None, request: dict[str, Any],
+               period: float) -> RequestResult:
         assert self.robot is not None and self.log is not None
         robot, elog, opts = self.robot, self.log, self.options
         self._recoveries = self._skill_failures = 0
+        with self._lock:
+            if not self._stop_requested:
+                self._halt_request = ""  # a halt asked for between requests concerns none
         tree = self.mission.instantiate(ctx, request, params=opts.params or None)
         t0 = robot.clock.now()
         elog.write("request_start", index=index, of=total, request=request, mission_sha256=self.mission.sha256,
@@ -568,6 +635,8 @@ class Runner:
         status = Status.RUNNING
         try:
             while True:
+                for hook in self._tick_hooks:
+                    hook(robot, period)
                 if self._interrupts > seen_interrupts:
                     seen_interrupts = self._interrupts
                     if halt_reason != "interrupt":
@@ -592,9 +661,14 @@ class Runner:
                     tree.request_halt()
                     wall_deadline = time.monotonic() + opts.halt_wall_limit
                     elog.write("halt", reason="timeout", index=index, limit=opts.request_timeout)
+                elif self._halt_request and not halt_reason:
+                    halt_reason = "cancel"
+                    tree.request_halt()
+                    wall_deadline = time.monotonic() + opts.halt_wall_limit
+                    elog.write("halt", reason="cancel", index=index, detail=self._halt_request)
                 status = tree.tick()
                 self.progress.update(
-                    f"[{index}/{total}] {robot.clock.now() - t0:7.1f} s  "
+                    f"[{index}{'' if total is None else f'/{total}'}] {robot.clock.now() - t0:7.1f} s  "
                     f"{'stopping ' if halt_reason else ''}{tree.tip_path() or '-'}"
                 )
                 if halt_reason:
@@ -623,6 +697,8 @@ class Runner:
             outcome = "interrupted"
         elif halt_reason == "timeout":
             outcome = "timeout"
+        elif halt_reason == "cancel":
+            outcome = "cancelled"
         else:
             outcome = "success" if status is Status.SUCCESS else "failure"
         reason, kind, node = "", "", ""
@@ -632,6 +708,8 @@ class Runner:
             signum = self.signal if self.signal is not None else signal.SIGINT
             reason = "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"interrupted ({_signal_name(signum)})"
             kind = "cancelled"
+        elif outcome == "cancelled":
+            reason, kind = self._halt_request, "cancelled"
         elif outcome == "error":
             reason = f"event log write failed: {_describe(elog.error)}" if elog.error is not None else ""
         elif outcome == "failure":
@@ -696,11 +774,12 @@ class Runner:
 
     # ------------------------------------------------------------------ output
 
-    def _print_result(self, r: RequestResult, total: int) -> None:
+    def _print_result(self, r: RequestResult, total: int | None) -> None:
         self.progress.clear()
         req = ", ".join(f"{k}={v}" for k, v in r.request.items()) or "-"
         rec = f", {r.recoveries} recover{'y' if r.recoveries == 1 else 'ies'}" if r.recoveries else ""
-        line = f"request {r.index}/{total} ({req}): {r.outcome} after {r.duration:.1f} s{rec}"
+        of = "" if total is None else f"/{total}"
+        line = f"request {r.index}{of} ({req}): {r.outcome} after {r.duration:.1f} s{rec}"
         if r.reason:
             line += f": {r.reason}" + (f" [{r.failure_node}]" if r.failure_node else "")
         self._say(line)

@@ -21,6 +21,7 @@ from mmexec.config.yamlload import Mark, Problems, YDict, YList, did_you_mean, r
 from mmexec.executive.nodes import OPS
 from mmexec.executive.values import (
     KEY_RE,
+    MAX_SECONDS,
     Const,
     Expr,
     ParamRef,
@@ -83,8 +84,6 @@ FAILURE_KEYS = {"last_failure": str, "last_failure_kind": str, "last_failure_nod
 SIZE_CAP = 1 << 40
 #: most attempts a retry, repetitions a repeat, or recoveries a recovery node may have
 MAX_COUNT = 1000
-#: longest wait or timeout a mission may give [clock s] (about 11.6 days)
-MAX_SECONDS = 1e6
 
 
 def recovery_key_prefix(spec: NodeSpec) -> str:

@@ -19,6 +19,7 @@ from typing import Any
 
 __all__ = [
     "KEY_RE",
+    "MAX_SECONDS",
     "Const",
     "DictExpr",
     "Expr",
@@ -33,6 +34,9 @@ __all__ = [
 ]
 
 #: a blackboard key or parameter name: dotted identifiers (``request.item``, ``grasp.attempts``)
+#: longest wait or timeout a mission may give [clock s] (about 11.6 days)
+MAX_SECONDS = 1e6
+
 KEY_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*(?:\.[A-Za-z0-9_\-]+)*")
 _TOKEN_RE = re.compile(r"\{\{|\}\}|\{([^{}]*)\}|[{}]")
 

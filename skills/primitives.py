@@ -21,7 +21,7 @@ import math
 from collections.abc import Generator, Mapping, Sequence
 from typing import Any
 
-from mmexec.drivers.interfaces import Base, Pose2D
+from mmexec.drivers.interfaces import BLIND_FAULTS, Base, Pose2D
 from mmexec.skills.base import (
     FailureKind,
     Output,
@@ -34,6 +34,7 @@ from mmexec.skills.base import (
 )
 
 __all__ = [
+    "brake",
     "close_gripper",
     "drive_to",
     "move_arm",
@@ -219,17 +220,22 @@ def close_gripper(ctx: SkillContext, force: float = 50.0, speed: float = 0.1, ex
 # --------------------------------------------------------------------------- base
 
 
-def _brake(ctx: SkillContext, base: Base) -> Generator[None, None, bool]:
-    """Command zero velocity every tick until the base is at rest (or BRAKE_LIMIT passed).
-    Returns True when it came to rest."""
-    end = ctx.clock.now() + BRAKE_LIMIT
+def brake(ctx: SkillContext, base: Base, limit: float = BRAKE_LIMIT) -> Generator[None, None, bool]:
+    """Command zero velocity every tick until the base is at rest or ``limit`` clock
+    seconds passed; returns True when it came to rest. Further cancellation is ignored
+    (it is already braking). A base with a :data:`BLIND_FAULTS` fault gets its stop and
+    the loop returns False at once: there is no measurement to wait for, and the failure
+    it reports must not be delayed."""
+    end = ctx.clock.now() + limit
     while True:
         base.stop()
         st = base.state()
+        if st.faults & BLIND_FAULTS:
+            return False
         if abs(st.v) < STOPPED_V and abs(st.w) < STOPPED_W:
             return True
         if ctx.clock.now() > end:
-            log.warning("base still moving (v=%.3f m/s, w=%.3f rad/s) %.1f s after stop", st.v, st.w, BRAKE_LIMIT)
+            log.warning("base still moving (v=%.3f m/s, w=%.3f rad/s) %.1f s after stop", st.v, st.w, limit)
             return False
         try:
             yield
@@ -310,10 +316,10 @@ def drive_to(
         while True:
             st = base.state()
             if st.faults:
-                yield from _brake(ctx, base)
+                yield from brake(ctx, base)
                 raise SkillFailure(FailureKind.EXECUTION, f"drive_to: base fault: {', '.join(sorted(st.faults))}")
             if deadline is not None and ctx.clock.now() > deadline:
-                yield from _brake(ctx, base)
+                yield from brake(ctx, base)
                 raise SkillFailure(FailureKind.TIMEOUT, f"drive_to: not there after {timeout:g} s")
             p = st.pose
             dx, dy = gx - p.x, gy - p.y
@@ -329,7 +335,7 @@ def drive_to(
             else:
                 err = 0.0 if gth is None else _wrap(gth - p.theta)
                 if abs(err) <= angle_tolerance:
-                    rested = yield from _brake(ctx, base)
+                    rested = yield from brake(ctx, base)
                     if not rested:
                         raise SkillFailure(FailureKind.EXECUTION, "drive_to: the base did not come to rest")
                     st = base.state()
@@ -343,7 +349,7 @@ def drive_to(
             base.set_velocity(v, w)
             yield
     except SkillCancelled:
-        yield from _brake(ctx, base)
+        yield from brake(ctx, base)
         raise
 
 
@@ -352,7 +358,7 @@ def stop_base(ctx: SkillContext) -> Gen:
     """Brake the base to rest; fails if it is still moving after a few seconds."""
     base = ctx.robot.base
     assert base is not None
-    rested = yield from _brake(ctx, base)
+    rested = yield from brake(ctx, base)
     if not rested:
         raise SkillFailure(FailureKind.EXECUTION, "stop_base: the base did not come to rest")
     p = base.state().pose

@@ -24,15 +24,15 @@ key                  value
 from __future__ import annotations
 
 import math
-from collections.abc import Generator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 
 from mmexec.config.yamlload import InputError, Mark, Problems, mark_of
-from mmexec.drivers.interfaces import Base, Pose2D
-from mmexec.skills.base import FailureKind, SkillCancelled, SkillContext, SkillFailure
+from mmexec.drivers.interfaces import Pose2D
+from mmexec.skills.base import FailureKind, SkillContext, SkillFailure
 from mmexec.skills.profile import PROFILE, declare_section, setting
 
 __all__ = [
@@ -49,7 +49,6 @@ __all__ = [
     "SearchProgress",
     "arm_status",
     "base_status",
-    "brake",
     "fetch_profile",
     "named_base_pose",
     "nav_margin",
@@ -62,9 +61,6 @@ WORLD_COSTMAP = "fetch.costmap"
 WORLD_SEARCH = "fetch.search"
 WORLD_HELD = "fetch.held"
 
-#: Below these speeds [m/s, rad/s] the base counts as stopped.
-STOPPED_V = 1e-3
-STOPPED_W = 1e-3
 
 
 # --------------------------------------------------------------------------- profile
@@ -297,23 +293,3 @@ def base_status(ctx: SkillContext, status: str, **fields: Any) -> None:
 def arm_status(ctx: SkillContext, status: str, **fields: Any) -> None:
     """Emit the seed's arm state: ``running``, ``success``, ``fail`` or ``idle``."""
     ctx.emit("arm_status", status=status, node=ctx.node_path, **fields)
-
-
-# --------------------------------------------------------------------------- base helpers
-
-
-def brake(ctx: SkillContext, base: Base, limit: float = 3.0) -> Generator[None, None, bool]:
-    """Command zero velocity every tick until the base is at rest or ``limit`` clock
-    seconds passed; returns whether it came to rest. Ignores further cancellation."""
-    end = ctx.clock.now() + limit
-    while True:
-        base.stop()
-        st = base.state()
-        if abs(st.v) < STOPPED_V and abs(st.w) < STOPPED_W:
-            return True
-        if ctx.clock.now() > end:
-            return False
-        try:
-            yield
-        except SkillCancelled:
-            continue

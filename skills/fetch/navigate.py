@@ -28,7 +28,6 @@ from mmexec.skills.base import (
 from mmexec.skills.fetch.common import (
     WORLD_COSTMAP,
     base_status,
-    brake,
     fetch_profile,
     markers,
     named_base_pose,
@@ -44,6 +43,7 @@ from mmexec.skills.navigation import (
     simplify_path,
 )
 from mmexec.skills.navigation.tracker import wrap_angle
+from mmexec.skills.primitives import brake
 
 __all__ = ["approach", "back_off", "costmap", "drive_path", "navigate", "rotate_by"]
 

@@ -19,13 +19,13 @@ from mmexec.skills.base import FailureKind, Output, Param, SkillContext, SkillFa
 from mmexec.skills.fetch.common import (
     WORLD_SEARCH,
     SearchProgress,
-    brake,
     fetch_profile,
     named_base_pose,
     pose_list,
 )
 from mmexec.skills.fetch.detect import look
 from mmexec.skills.fetch.navigate import drive_path, rotate_by
+from mmexec.skills.primitives import brake
 
 __all__ = ["search"]
 

@@ -283,6 +283,21 @@ def test_wait_uses_clock(h):
     assert h.run(t, dt=0.1) == (S, 6)
 
 
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), -1.0, 2e6])
+def test_wait_refuses_a_blackboard_value_that_would_never_end(h, value):
+    # literals are refused at load; a value that arrives on the blackboard (a skill output,
+    # a request) is checked when the wait starts: NaN never compares >= and inf never comes
+    t = h.tree("""
+        requests:
+          pause: {type: float}
+        tree:
+          wait: "{request.pause}"
+    """, request={"pause": 0.5})
+    t.rt.bb["request.pause"] = value
+    assert h.run(t) == (F, 1)
+    assert "wait: seconds must be a number in 0..1e+06" in t.rt.bb["last_failure"]
+
+
 def test_skill_params_from_blackboard_and_outputs(h):
     t = h.tree("""
         requests:

@@ -253,3 +253,11 @@ def test_run_end_records_the_exit_code_the_command_returns(tmp_path: Path, exc, 
         r.run()
     run_end = events(tmp_path / "run.jsonl", "run_end")[0]
     assert run_end["outcome"] == "error" and run_end["exit_code"] == code
+
+
+@pytest.mark.parametrize("rate", [0.5, 1001.0, float("nan"), float("inf")])
+def test_prepare_refuses_a_tick_rate_the_config_would_refuse(tmp_path: Path, rate: float) -> None:
+    # a library caller (campaign, serve) gets the same bounds as the command line and config
+    m, c = make(tmp_path)
+    with pytest.raises(InputError, match=r"--rate.*expected a tick rate in \[1, 1000\] Hz"):
+        runner_for(tmp_path, m, c, reqs(1), rate_hz=rate)

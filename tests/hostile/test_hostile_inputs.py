@@ -156,6 +156,24 @@ for _name, (_flags, _expect) in FLAG_CASES.items():
     GENERATED[_name] = lambda tmp, flags=_flags, expect=_expect: (_run_argv(tmp, *flags), expect)
 
 
+def _campaign_argv(tmp: Path, *extra: str) -> list[str | Path]:
+    """``mmexec campaign`` of the valid mission on the mock config, one trial."""
+    return ["campaign", MISSION, "--config", CONFIG, "--trials", "1", "--request", "x=1",
+            "--out", tmp / "camp", *extra]
+
+
+#: the same values given to ``mmexec campaign`` (checked before any trial starts)
+CAMPAIGN_FLAG_CASES: dict[str, tuple[tuple[str, ...], str]] = {
+    "08_campaign_request_timeout_nan": (("--request-timeout", "nan"),
+                                        "--request-timeout: expected seconds > 0 and at most 1e+06, got nan"),
+    "08_campaign_trial_timeout_inf": (("--trial-timeout", "inf"),
+                                      "--trial-timeout: expected seconds > 0 and at most 1e+06, got inf"),
+    "11_campaign_seed_negative": (("--seed", "-1"), "--seed: expected an integer in 0..4294967295, got -1"),
+}
+for _name, (_flags, _expect) in CAMPAIGN_FLAG_CASES.items():
+    GENERATED[_name] = lambda tmp, flags=_flags, expect=_expect: (_campaign_argv(tmp, *flags), expect)
+
+
 # item 9: files that are not regular files, or too large
 @case("09_config_dev_zero")
 def _(tmp: Path):

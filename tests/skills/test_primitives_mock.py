@@ -7,6 +7,7 @@ import math
 import pytest
 
 import mmexec.skills.primitives  # noqa: F401 - registers the primitives
+from mmexec.drivers.interfaces import BaseState
 from mmexec.drivers.mock import MockRobot
 from mmexec.skills.base import REGISTRY, FailureKind, SkillContext, SkillRun, SkillStatus
 
@@ -174,3 +175,23 @@ def test_stop_base(run_mock_skill, mock_robot) -> None:
 
 def test_skill_ctx_is_plain_context(skill_ctx) -> None:
     assert isinstance(skill_ctx, SkillContext)
+
+
+def test_drive_to_fails_at_once_when_the_base_goes_blind(skill_ctx, mock_robot) -> None:
+    # A base whose link is gone reports link_lost and a velocity that is no measurement
+    # (here a stale 0.3 m/s): the skill commands the stop and fails in the same tick
+    # instead of waiting BRAKE_LIMIT seconds for a rest it cannot observe.
+    base = mock_robot.base
+    run = SkillRun(REGISTRY.get("drive_to"), skill_ctx, {"x": 5.0, "y": 0.0})
+    run.start()
+    for _ in range(10):
+        mock_robot.spin(0.05)
+        run.tick()
+    stale = BaseState(base.pose, 0.3, 0.0, 0.0, frozenset({"link_lost"}))
+    base.state = lambda: stale  # type: ignore[method-assign]
+    t0 = mock_robot.clock.now()
+    run.tick()
+    assert run.status is SkillStatus.FAILURE
+    assert "link_lost" in run.failure.reason
+    assert mock_robot.clock.now() == t0
+    assert base._cmd == (0.0, 0.0)  # the stop was commanded
