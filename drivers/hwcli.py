@@ -13,7 +13,8 @@ Each device package provides ``mmexec.drivers.<device>.bringup`` with
 ``add_ping_arguments(parser)``, ``ping(args) -> int``, ``add_fake_arguments(parser)``
 and ``run_fake(args) -> int``; this module only dispatches to them, importing the
 one it needs lazily so a missing driver is a one-line error, not a traceback.
-Exit status: 0 when the device answers, non-zero otherwise with one line on stderr.
+Exit status: 0 ready; 1 the device answered but is not fit to run, or gave no useful
+answer; 2 bad input or the port cannot be opened; each failure one line on stderr.
 Driver log records are held back below CRITICAL while a command runs (they would repeat
 that line); set ``MMEXEC_DEBUG=1`` to see them. Also runnable as
 ``python -m mmexec.drivers.hwcli``.
@@ -27,6 +28,8 @@ import logging
 import os
 import sys
 from types import ModuleType
+
+from mmexec.config.brokenpipe import detach_stdout
 
 __all__ = ["DEVICES", "main"]
 
@@ -115,6 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"mmexec hw {action} {device}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # stdout's reader went away (`| head`): the device is closed, exit quietly
+        return detach_stdout()
     except Exception as e:
         log.debug("mmexec hw %s %s failed", action, device, exc_info=True)
         print(f"mmexec hw {action} {device}: {type(e).__name__}: {e}", file=sys.stderr)

@@ -109,3 +109,22 @@ def test_ur(capsys: pytest.CaptureFixture[str]) -> None:
         assert rc == 0 and out.startswith(f"ur {host}:30004: controller ") and err == ""
     rc, out, err = ping(capsys, "ur", "--host", host, "--timeout", "0.5")  # the fake is gone
     assert rc == 1 and out == "" and "\n" not in err and err.startswith(f"ur {host}:30004: ")
+
+
+def test_ping_into_a_closed_pipe_exits_quietly() -> None:
+    # `mmexec hw ping kobuki ... | head -0`: the reader is gone before the line is written;
+    # the ping closes the device and exits 141 (128 + SIGPIPE) with nothing on stderr,
+    # as the other commands do (it printed "BrokenPipeError" and exited 1)
+    from mmexec.config.brokenpipe import EXIT_BROKEN_PIPE
+
+    mmexec = os.path.join(os.path.dirname(sys.executable), "mmexec")
+    with fake_process("kobuki") as port:
+        for argv in ([mmexec, "hw"], HW):
+            read_end, write_end = os.pipe()
+            os.close(read_end)
+            try:
+                res = subprocess.run([*argv, "ping", "kobuki", "--port", port], stdout=write_end,
+                                     stderr=subprocess.PIPE, text=True, timeout=60, check=False)
+            finally:
+                os.close(write_end)
+            assert (res.returncode, res.stderr) == (EXIT_BROKEN_PIPE, "")
