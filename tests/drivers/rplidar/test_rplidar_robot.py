@@ -16,7 +16,7 @@ from mmexec.drivers.fakes.rplidar import RplidarFake
 from mmexec.drivers.rplidar.lidar import RplidarLidar
 from mmexec.executive.config import build_robot, load_config
 
-#: laser_frame_link in base_footprint on the LoCoBot (robots.md 1.2), as config/locobot.yaml has it
+#: laser_frame_link in base_footprint on the LoCoBot (docs/robots.md 1.2), as config/locobot.yaml has it
 MOUNT = "pose_in_base: {xyz: [-0.097997, -0.000044, 0.63693], rpy: [0.0, 0.0, 3.1415927]}"
 
 
