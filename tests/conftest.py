@@ -1,7 +1,7 @@
 """Shared test helpers for the whole suite.
 
 The mock backend's fixtures (``mock_robot``, ``skill_ctx``, ``run_mock_skill``) come from
-the installed pytest plugin :mod:`mmexec.drivers.mock.pytest_plugin`; this file only adds
+the installed pytest plugin :mod:`mmexec.skills.testing.pytest_plugin`; this file only adds
 repository-level helpers.
 """
 

@@ -72,7 +72,7 @@ def test_move_arm_preconditions(run_mock_skill, mock_robot, params, needle) -> N
 
 def test_move_arm_needs_an_arm() -> None:
     robot = MockRobot(capabilities={"base"})
-    from mmexec.drivers.mock import run_with_mock
+    from mmexec.skills.testing import run_with_mock
 
     run = run_with_mock("move_arm", robot, {"pose": "home"})
     assert run.failure.kind is FailureKind.PRECONDITION and "needs a arm" in run.failure.reason

@@ -3,7 +3,7 @@ installed pytest plugin)."""
 
 from __future__ import annotations
 
-from mmexec.drivers.mock import MockRobot, run_with_mock
+from mmexec.drivers.mock import MockRobot
 from mmexec.skills.base import (
     REGISTRY,
     FailureKind,
@@ -15,6 +15,7 @@ from mmexec.skills.base import (
     skill,
     wait_goal,
 )
+from mmexec.skills.testing import run_with_mock
 
 REG = REGISTRY.copy()
 

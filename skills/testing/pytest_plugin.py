@@ -65,7 +65,7 @@ def skill_ctx(mock_robot: MockRobot) -> SkillContext:
 def run_mock_skill(
     mock_robot: MockRobot, skill_ctx: SkillContext
 ) -> Callable[..., SkillRun]:
-    from mmexec.drivers.mock import run_with_mock
+    from mmexec.skills.testing import run_with_mock
 
     def run(skill: SkillSpec | str, params: Mapping[str, Any] | None = None, *, period: float = 0.05,
             max_ticks: int = 100_000) -> SkillRun:
