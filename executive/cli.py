@@ -90,17 +90,17 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--request", action="append", nargs="+", default=[], metavar="K=V",
                    help="one request (repeat the option for more); several K=V fields per request")
     r.add_argument("--requests", type=Path, metavar="FILE", help="YAML list of request mappings (served after --request ones)")
-    r.add_argument("--param", action="append", default=[], metavar="K=V", help="override a mission parameter")
-    r.add_argument("--seed", type=int)
-    r.add_argument("--log", type=Path, metavar="FILE",
-                   help="event log, a new file (default mmexec-logs/<mission>-<time>-<pid>.jsonl)")
-    r.add_argument("--overwrite", action="store_true", help="replace an existing --log file (never a symlink)")
-    r.add_argument("--rate", type=float, metavar="HZ", help="tick rate, overrides the config's rate_hz")
-    r.add_argument("--request-timeout", type=float, metavar="S", help="halt a request after S clock seconds")
+    _add_run_options(r)
     r.add_argument("--watch", action="store_true", help="reload the mission between requests when it changes")
-    r.add_argument("--gui", action="store_true", help="show the simulator window (sim backend)")
-    r.add_argument("--record", type=Path, metavar="FILE", help="record a video (sim backend)")
-    r.add_argument("--no-recovery", action="store_true", help="disable every recovery node (ablation)")
+    r.add_argument("--answers", type=Path, metavar="FILE",
+                   help="YAML list of answers to ask_operator prompts, in order (default: ask on the terminal)")
+
+    sv = sub.add_parser("serve", help="run the executive as a service: HTTP + WebSocket API, requests as they arrive")
+    sv.add_argument("mission", type=Path)
+    sv.add_argument("--config", type=Path, required=True)
+    sv.add_argument("--bind", default="127.0.0.1:8765", metavar="HOST:PORT",
+                    help="where the API listens (default 127.0.0.1:8765; off loopback every call needs the token)")
+    _add_run_options(sv)
 
     lg = sub.add_parser("log", help="read an event log")
     lsub = lg.add_subparsers(dest="log_command", metavar="ACTION", parser_class=_Parser)
@@ -122,6 +122,20 @@ def _parser() -> argparse.ArgumentParser:
                    help="the small mock-backend demo instead (trees/demo_mock.yaml, no simulator)")
     sub.add_parser("hw", help="hardware bring-up tools (mmexec hw --help)", add_help=False)
     return p
+
+
+def _add_run_options(p: argparse.ArgumentParser) -> None:
+    """The options ``run`` and ``serve`` share."""
+    p.add_argument("--param", action="append", default=[], metavar="K=V", help="override a mission parameter")
+    p.add_argument("--seed", type=int)
+    p.add_argument("--log", type=Path, metavar="FILE",
+                   help="event log, a new file (default mmexec-logs/<mission>-<time>-<pid>.jsonl)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing --log file (never a symlink)")
+    p.add_argument("--rate", type=float, metavar="HZ", help="tick rate, overrides the config's rate_hz")
+    p.add_argument("--request-timeout", type=float, metavar="S", help="halt a request after S clock seconds")
+    p.add_argument("--gui", action="store_true", help="show the simulator window (sim backend)")
+    p.add_argument("--record", type=Path, metavar="FILE", help="record a video (sim backend)")
+    p.add_argument("--no-recovery", action="store_true", help="disable every recovery node (ablation)")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -385,9 +399,10 @@ def _check_run_flags(args: argparse.Namespace) -> None:
         raise InputError(problems)
 
 
-def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namespace | None,
-         argv: Sequence[str]) -> int:
-    from mmexec.executive.runner import Runner, RunOptions
+def _run_options(mission: Path, config: Path, requests: list[Any], args: argparse.Namespace | None,
+                 argv: Sequence[str]) -> Any:
+    """The :class:`~mmexec.executive.runner.RunOptions` of ``run`` / ``serve`` (InputError)."""
+    from mmexec.executive.runner import RunOptions
 
     params: dict[str, Any] = {}
     if args is not None:
@@ -398,18 +413,46 @@ def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namesp
     if args is not None:
         opts.seed, opts.log_path, opts.rate_hz = args.seed, args.log, args.rate
         opts.overwrite = getattr(args, "overwrite", False)
-        opts.watch, opts.gui, opts.record = args.watch, args.gui, args.record
+        opts.watch, opts.gui, opts.record = getattr(args, "watch", False), args.gui, args.record
         opts.request_timeout = args.request_timeout
         opts.recovery_enabled = not getattr(args, "no_recovery", False)
         _check_run_flags(args)
+    return opts
+
+
+def _check_params(runner: Any) -> None:
+    """InputError (at ``--param``) when the mission refuses the ``--param`` values."""
+    if runner.options.params:
+        try:
+            runner.mission.resolve_params(runner.options.params)
+        except ValueError as e:
+            raise InputError.at(ArgMark("--param", 1, 1), str(e)) from None
+
+
+def _attach_operator(runner: Any, answers: Path | None) -> None:
+    """Who answers ``ask_operator`` in ``run``: the ``--answers`` script, else the
+    terminal when standard input is one, else nobody (the skill fails saying so)."""
+    from mmexec.executive.serve.prompts import ScriptedAnswers, TerminalOperator, load_answers
+    from mmexec.skills.operator import OPERATOR_KEY
+
+    if answers is not None:
+        runner.world[OPERATOR_KEY] = ScriptedAnswers(load_answers(answers), answers)
+    elif sys.stdin is not None and sys.stdin.isatty():
+        term = TerminalOperator(sys.stdin.fileno(), sys.stderr, progress=runner.progress)
+        runner.world[OPERATOR_KEY] = term
+        runner.add_tick_hook(term.pace)
+
+
+def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namespace | None,
+         argv: Sequence[str]) -> int:
+    from mmexec.executive.runner import Runner
+
+    opts = _run_options(mission, config, requests, args, argv)
     _preload_pybullet_quietly()
     runner = Runner(opts)
     runner.prepare()
-    if params:
-        try:
-            runner.mission.resolve_params(params)
-        except ValueError as e:
-            raise InputError.at(ArgMark("--param", 1, 1), str(e)) from None
+    _check_params(runner)
+    _attach_operator(runner, getattr(args, "answers", None))
     _CURRENT_LOG[0] = opts.log_path
     try:
         return runner.run()
@@ -422,6 +465,25 @@ def _cmd_run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.requests is not None:
         requests += _file_requests(args.requests)
     return _run(args.mission, args.config, requests, args, argv)
+
+
+def _cmd_serve(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``mmexec serve``: see :mod:`mmexec.executive.serve.server` and docs/console.md."""
+    try:
+        from mmexec.executive.serve.server import ServeRunner, serve
+    except ModuleNotFoundError as e:
+        if e.name not in ("fastapi", "uvicorn", "starlette", "pydantic"):
+            raise
+        raise UsageError(f"mmexec serve: needs the {e.name} package (pip install fastapi uvicorn)") from None
+    opts = _run_options(args.mission, args.config, [], args, argv)
+    _preload_pybullet_quietly()
+    _CURRENT_LOG[0] = opts.log_path
+    runners: list[ServeRunner] = []
+    try:
+        return serve(opts, args.bind, out=sys.stdout, err=sys.stderr, check=_check_params, made=runners.append)
+    finally:
+        if runners:
+            _CURRENT_LOG[0] = runners[0].log_path
 
 
 def _cmd_demo(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -567,6 +629,8 @@ def _command(args: argparse.Namespace, argv: list[str]) -> int:
         return _cmd_log(args)
     if args.command == "demo":
         return _cmd_demo(args, argv)
+    if args.command == "serve":
+        return _cmd_serve(args, argv)
     if args.command == "campaign":
         from mmexec.executive.campaign import cmd_campaign
 

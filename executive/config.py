@@ -89,7 +89,7 @@ _OPTION_FLAGS: dict[str, tuple[str, str]] = {
 CAPABILITIES: tuple[str, ...] = ("base", "arm", "gripper", "camera", "lidar")
 
 #: Modules that define the built-in skills, imported before any user module.
-BUILTIN_SKILL_MODULES: tuple[str, ...] = ("mmexec.skills.primitives", "mmexec.skills.fetch")
+BUILTIN_SKILL_MODULES: tuple[str, ...] = ("mmexec.skills.primitives", "mmexec.skills.operator", "mmexec.skills.fetch")
 
 
 #: Tick rates a config or ``--rate`` may ask for [Hz of clock time].
@@ -114,6 +114,9 @@ class RunConfig:
     mock: Any = None
     sim: Any = None
     robot: Any = None
+    #: ``mmexec serve`` settings (token file, CORS origins, body cap, stream rates), bound
+    #: by :func:`mmexec.executive.serve.settings.parse_section`
+    serve: Any = None
     #: more folders (relative to the config file) that mission includes and world files
     #: may come from, besides the mission's folder, trees/ and sim/worlds/
     roots: list[str] = field(default_factory=list)

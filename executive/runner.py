@@ -353,6 +353,10 @@ class Runner:
         """How many requests the run serves (``of`` in ``request_start``); None: open-ended."""
         return len(self._requests)
 
+    def _end_queue(self) -> None:
+        """Called once after the last request, before ``run_end`` (a service drops what is
+        still queued). Here: nothing."""
+
     def _record(self, result: RequestResult, total: int | None) -> None:
         """Keep the result of a served request and print its line."""
         self._served += 1
@@ -534,6 +538,7 @@ class Runner:
                     break
                 total = self._total()
                 self._record(self._serve(ctx, nxt[0], total, nxt[1], 1.0 / rate), total)
+            self._end_queue()
             total = self._total()
             n = total if total is not None else self._served
             ok = self._succeeded

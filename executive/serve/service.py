@@ -1,0 +1,599 @@
+"""The service behind ``mmexec serve``: a request queue fed while the executive runs.
+
+Threads: the tick loop (:class:`ServeRunner`, a :class:`~mmexec.executive.runner.Runner`)
+runs in the main thread, as ``mmexec run`` does, keeping its clock and its signal and
+safety contract; the HTTP server runs in another thread and talks to the loop only
+through :class:`Service`, whose state is locked and whose commands go through a queue
+the loop drains between ticks (and while idle). Only the tick thread touches the robot
+and writes the event log; the log stays the canonical record and is written exactly as
+``run`` writes it, plus the service's own records:
+
+======================  ===================================================================
+``request_queued``      id, request (the validated fields): a request was accepted
+``request_dropped``     id, request, reason: it left the queue without being served
+                        (cancelled by the API, or the service stopped)
+``paused`` / ``resumed``  serving new requests was paused / resumed
+``stop``                reason: the API asked the service to stop
+======================  ===================================================================
+
+A served request's ``request_start`` / ``request_end`` ``index`` is its id, so every
+accepted request ends in exactly one ``request_end`` or ``request_dropped``.
+
+Streams (:class:`Hub`): every event-log record, tree snapshots, status, robot pose, path,
+map, scan, camera frames (JPEG, rate-limited) and operator prompts, each a JSON message
+``{"type": TOPIC, "data": ...}`` (shapes in docs/console.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import itertools
+import json
+import logging
+import math
+import queue
+import threading
+import time
+from collections import deque
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from mmexec.drivers.interfaces import Robot
+from mmexec.executive.runner import RequestResult, Runner, RunOptions
+from mmexec.executive.serve.prompts import PromptBoard
+from mmexec.executive.serve.settings import ServeSettings, parse_section
+from mmexec.skills.operator import OPERATOR_KEY
+
+__all__ = [
+    "TOPICS",
+    "WORLD_PATH",
+    "Hub",
+    "QueuedRequest",
+    "ServeRunner",
+    "Service",
+    "ServiceError",
+    "TreeView",
+]
+
+log = logging.getLogger(__name__)
+
+#: Stream topics a WebSocket client may subscribe to.
+TOPICS = ("status", "tree", "event", "pose", "path", "map", "scan", "camera", "prompt")
+#: ``ctx.world`` key where a navigation skill may publish its current path: a list of
+#: [x, y] points in ``map`` [m]; streamed as ``path`` whenever it is replaced.
+WORLD_PATH = "nav.path"
+#: Messages a slow WebSocket client may have waiting before new ones are dropped.
+CLIENT_QUEUE = 2000
+#: [wall s] longest idle wait on a stepped clock before the loop looks again.
+IDLE_WAIT = 0.1
+#: JPEG quality of streamed camera frames (0..100).
+STREAM_JPEG_QUALITY = 70
+#: [wall Hz] how often the status is streamed while nothing else changes it
+STATUS_HZ = 2.0
+_STICKY = ("status", "tree", "map", "pose", "path")
+
+
+class ServiceError(Exception):
+    """An API call that cannot be done: ``status`` (HTTP 4xx) and a one-line message."""
+
+    def __init__(self, status: int, message: str) -> None:
+        super().__init__(message)
+        self.status = status
+        self.message = message
+
+
+@dataclass
+class QueuedRequest:
+    """A request the service accepted: its ``id`` (1, 2, ... in submission order), the
+    validated ``fields``, ``state`` (``queued``, ``running``, then the request's outcome
+    or ``dropped``) and ``reason`` (why it failed or was dropped)."""
+
+    id: int
+    fields: dict[str, Any]
+    state: str = "queued"
+    reason: str = ""
+    duration: float | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"id": self.id, "request": dict(self.fields), "state": self.state, "reason": self.reason,
+                "duration": self.duration}
+
+
+# --------------------------------------------------------------------------- streams
+
+
+@dataclass(eq=False)
+class _Client:
+    loop: asyncio.AbstractEventLoop
+    topics: frozenset[str]
+    queue: asyncio.Queue[str] = field(default_factory=lambda: asyncio.Queue(CLIENT_QUEUE))
+    dropped: int = 0
+
+    def offer(self, text: str) -> None:
+        """In the client's event loop: queue ``text``, or count it dropped when full."""
+        try:
+            self.queue.put_nowait(text)
+        except asyncio.QueueFull:
+            self.dropped += 1
+
+
+class Hub:
+    """Fan-out of stream messages from any thread to WebSocket clients, each with its own
+    bounded queue in its event loop (a slow client loses messages, counted in
+    ``dropped``, and never slows the tick). The last message of each sticky topic
+    (status, tree, map, pose, path) is kept and sent first to a new client."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._clients: list[_Client] = []
+        self._latest: dict[str, str] = {}
+
+    def attach(self, loop: asyncio.AbstractEventLoop, topics: Iterable[str]) -> _Client:
+        client = _Client(loop, frozenset(topics))
+        with self._lock:
+            self._clients.append(client)
+            for topic, text in self._latest.items():
+                if topic in client.topics:
+                    client.offer(text)
+        return client
+
+    def detach(self, client: _Client) -> None:
+        with self._lock:
+            if client in self._clients:
+                self._clients.remove(client)
+
+    def wants(self, topic: str) -> bool:
+        """Whether any client subscribed to ``topic`` (skip costly messages otherwise)."""
+        with self._lock:
+            return any(topic in c.topics for c in self._clients)
+
+    def publish(self, topic: str, data: Any) -> None:
+        text = json.dumps({"type": topic, "data": data}, separators=(",", ":"), allow_nan=False)
+        with self._lock:
+            if topic in _STICKY:
+                self._latest[topic] = text
+            clients = [c for c in self._clients if topic in c.topics]
+        for c in clients:
+            try:
+                c.loop.call_soon_threadsafe(c.offer, text)
+            except RuntimeError as e:  # the client's loop closed under it: it is gone
+                log.debug("stream client gone: %s", e)
+                self.detach(c)
+
+    @property
+    def clients(self) -> int:
+        with self._lock:
+            return len(self._clients)
+
+
+class TreeView:
+    """The running tree's node statuses, rebuilt from event-log records: ``request_start``
+    (every node path) and ``node_status`` (a change). :meth:`snapshot` is the ``tree``
+    message."""
+
+    def __init__(self) -> None:
+        self.request: int | None = None
+        self.order: list[str] = []
+        self.status: dict[str, str] = {}
+        self.changed: set[str] = set()
+        self.t = 0.0
+
+    def feed(self, record: Mapping[str, Any]) -> bool:
+        """Take one record; returns whether the tree changed."""
+        ev = record.get("event")
+        if ev == "request_start":
+            self.request = record.get("index")
+            self.order = [str(p) for p in record.get("nodes", [])]
+            self.status = dict.fromkeys(self.order, "INVALID")
+            self.changed = set(self.order)
+        elif ev == "node_status" and record.get("path") in self.status:
+            self.status[record["path"]] = str(record.get("new"))
+            self.changed.add(record["path"])
+        else:
+            return False
+        self.t = float(record.get("t", self.t))
+        return True
+
+    def snapshot(self) -> dict[str, Any]:
+        nodes = [{"path": p, "name": p.rsplit("/", 1)[-1], "parent": p.rsplit("/", 1)[0] if "/" in p else None,
+                  "status": self.status[p]} for p in self.order]
+        snap = {"request": self.request, "t": self.t, "nodes": nodes, "changed": sorted(self.changed)}
+        self.changed = set()
+        return snap
+
+
+# --------------------------------------------------------------------------- service state
+
+
+class Service:
+    """The queue and state shared by the HTTP thread and the tick loop (see module doc).
+
+    Methods for the HTTP thread validate and answer at once (raising
+    :class:`ServiceError`); what the tick loop must do or log goes through the command
+    queue it drains with :meth:`commands`.
+    """
+
+    def __init__(self, mission: Any = None, settings: ServeSettings | None = None) -> None:
+        self.mission = mission
+        self.settings = settings if settings is not None else ServeSettings()
+        self.hub = Hub()
+        self.prompts = PromptBoard(notify=self._on_prompt)
+        self._lock = threading.Lock()
+        self._queue: deque[QueuedRequest] = deque()
+        self._finished: deque[QueuedRequest] = deque(maxlen=self.settings.history)
+        self._current: QueuedRequest | None = None
+        self._ids = itertools.count(1)
+        self._commands: queue.SimpleQueue[tuple[Any, ...]] = queue.SimpleQueue()
+        self._wake = threading.Event()
+        self.paused = False
+        self.stopping = False
+        self.state = "starting"
+        self.counts = {"accepted": 0, "served": 0, "succeeded": 0, "failed": 0, "dropped": 0}
+        self.t = 0.0
+        self.tip = ""
+        self.info: dict[str, Any] = {}
+
+    def configure(self, mission: Any, settings: ServeSettings) -> None:
+        """Set the mission requests are checked against and the settings (before serving)."""
+        with self._lock:
+            self.mission = mission
+            self.settings = settings
+            self._finished = deque(self._finished, maxlen=settings.history)
+
+    # ---------------------------------------------------------------- HTTP thread
+
+    def submit(self, body: Any) -> QueuedRequest:
+        """Queue a request: ``body`` is a JSON object of request fields, checked exactly as
+        ``--request`` is. 422 bad fields, 409 stopping, 429 queue full."""
+        where = "POST /api/requests"
+        if not isinstance(body, dict):
+            raise ServiceError(422, f"{where}: expected a JSON object of request fields, e.g. {{\"item\": 3}}")
+        for k, v in body.items():
+            if isinstance(v, (dict, list)):
+                raise ServiceError(422, f"{where}: request field {k!r}: expected a scalar value")
+        try:
+            fields = dict(self.mission.validate_request(body))
+        except ValueError as e:
+            raise ServiceError(422, f"{where}: {e}") from None
+        with self._lock:
+            if self.stopping:
+                raise ServiceError(409, f"{where}: the service is stopping; no new requests")
+            if len(self._queue) >= self.settings.max_queue:
+                raise ServiceError(429, f"{where}: the queue is full ({self.settings.max_queue} requests waiting)")
+            req = QueuedRequest(next(self._ids), fields)
+            self._queue.append(req)
+            self.counts["accepted"] += 1
+            self._commands.put(("queued", req))
+        self._changed()
+        return req
+
+    def cancel(self, rid: int) -> QueuedRequest:
+        """Cancel request ``rid``: a queued one is dropped at once (state ``dropped``); the
+        running one is halted (state stays ``running`` until it has stopped: ``halting``
+        is set in ``reason``). 404 unknown, 409 already ended."""
+        with self._lock:
+            for req in self._queue:
+                if req.id == rid:
+                    self._queue.remove(req)
+                    self._drop(req, "cancelled through the API")
+                    break
+            else:
+                req = self._running_or_error(rid)
+                self._commands.put(("halt", rid, "cancelled through the API"))
+                req.reason = "halting"
+        self._changed()
+        return req
+
+    def halt(self) -> QueuedRequest:
+        """Halt the running request (409 when none runs)."""
+        with self._lock:
+            req = self._current
+            if req is None:
+                raise ServiceError(409, "POST /api/halt: no request is running")
+            self._commands.put(("halt", req.id, "halted through the API"))
+            req.reason = "halting"
+        return req
+
+    def set_paused(self, paused: bool) -> dict[str, Any]:
+        """Pause (or resume) taking requests from the queue; a running one goes on."""
+        with self._lock:
+            if self.stopping:
+                raise ServiceError(409, f"POST /api/{'pause' if paused else 'resume'}: the service is stopping")
+            if self.paused != paused:
+                self.paused = paused
+                self._commands.put(("paused" if paused else "resumed",))
+        self._changed()
+        return self.status()
+
+    def stop(self) -> dict[str, Any]:
+        """Stop the service: halt the running request, drop the queue, close the robot."""
+        with self._lock:
+            if not self.stopping:
+                self.stopping = True
+                self._commands.put(("stop", "stopped through the API"))
+        self._changed()
+        return self.status()
+
+    def current_id(self) -> int | None:
+        with self._lock:
+            return self._current.id if self._current is not None else None
+
+    def get(self, rid: int) -> QueuedRequest:
+        with self._lock:
+            for req in itertools.chain(self._queue, [self._current] if self._current else [], self._finished):
+                if req.id == rid:
+                    return req
+        raise ServiceError(404, f"request {rid}: no such request (or it left the history of "
+                                f"{self.settings.history})")
+
+    def requests(self) -> dict[str, Any]:
+        with self._lock:
+            return {"current": self._current.to_json() if self._current else None,
+                    "queued": [r.to_json() for r in self._queue],
+                    "finished": [r.to_json() for r in reversed(self._finished)]}
+
+    def status(self) -> dict[str, Any]:
+        with self._lock:
+            state = self.state
+            if state == "idle" and self.paused:
+                state = "paused"
+            if self.stopping and state not in ("stopped",):
+                state = "stopping"
+            return {
+                **self.info, "state": state, "paused": self.paused, "t": self.t, "tip": self.tip,
+                "current": self._current.to_json() if self._current else None, "queued": len(self._queue),
+                "counts": dict(self.counts), "prompts": [p.id for p in self.prompts.open_prompts()],
+                "clients": self.hub.clients,
+            }
+
+    def _running_or_error(self, rid: int) -> QueuedRequest:
+        if self._current is not None and self._current.id == rid:
+            return self._current
+        for req in self._finished:
+            if req.id == rid:
+                raise ServiceError(409, f"request {rid}: already ended ({req.state})")
+        raise ServiceError(404, f"request {rid}: no such request")
+
+    def _drop(self, req: QueuedRequest, reason: str) -> None:
+        req.state, req.reason = "dropped", reason
+        self._finished.append(req)
+        self.counts["dropped"] += 1
+        self._commands.put(("dropped", req, reason))
+
+    def _changed(self) -> None:
+        self._wake.set()
+
+    def _on_prompt(self, kind: str, data: dict[str, Any]) -> None:
+        if kind == "prompt" and data.get("has_image"):
+            data = {**data, "image_url": f"/api/prompts/{data['id']}/image"}
+        self.hub.publish("prompt", {"action": kind, **data})
+        self._wake.set()
+
+    # ---------------------------------------------------------------- tick thread
+
+    def commands(self) -> list[tuple[Any, ...]]:
+        """Every command queued since the last call, in order (tick thread)."""
+        out = []
+        while True:
+            try:
+                out.append(self._commands.get_nowait())
+            except queue.Empty:
+                return out
+
+    def take(self) -> QueuedRequest | None:
+        """The next request to serve (now ``running``), or None (empty, paused, stopping)."""
+        with self._lock:
+            if self.paused or self.stopping or not self._queue:
+                return None
+            req = self._current = self._queue.popleft()
+            req.state = "running"
+            self.state = "running"
+        return req
+
+    def finished(self, result: RequestResult) -> None:
+        with self._lock:
+            req = self._current
+            self._current = None
+            self.state = "idle"
+            self.counts["served"] += 1
+            self.counts["succeeded" if result.ok else "failed"] += 1
+            if req is not None:
+                req.state, req.reason, req.duration = result.outcome, result.reason, result.duration
+                self._finished.append(req)
+
+    def drop_all(self, reason: str) -> None:
+        """Drop every queued request (the run is ending)."""
+        with self._lock:
+            while self._queue:
+                self._drop(self._queue.popleft(), reason)
+            self.stopping = True
+
+    def set_state(self, state: str, t: float | None = None, tip: str | None = None) -> None:
+        with self._lock:
+            self.state = state
+            if t is not None:
+                self.t = t
+            if tip is not None:
+                self.tip = tip
+
+    def wait(self, timeout: float) -> None:
+        """Idle wait [wall s] that ends early when something changes (tick thread)."""
+        self._wake.wait(timeout)
+        self._wake.clear()
+
+
+# --------------------------------------------------------------------------- the tick loop
+
+
+def _finite_or_none(values: Iterable[float]) -> list[float | None]:
+    return [float(x) if math.isfinite(x) else None for x in values]
+
+
+class ServeRunner(Runner):
+    """A :class:`Runner` whose requests come from a :class:`Service` until it is stopped
+    (through the API, or by SIGINT / SIGTERM / SIGHUP with ``run``'s safety contract).
+    Between requests it waits: on a wall clock spinning the robot each period, on a
+    stepped clock without stepping (the simulated world holds still while idle)."""
+
+    def __init__(self, options: RunOptions, service: Service, **kw: Any) -> None:
+        super().__init__(options, **kw)
+        self.service = service
+        self.world[OPERATOR_KEY] = service.prompts
+        self.tree = TreeView()
+        self._due: dict[str, float] = {}
+        self._last_path: Any = None
+        self._period = 0.05
+        self.add_log_listener(self._on_record)
+        self.add_tick_hook(self._between_ticks)
+
+    def prepare(self) -> None:
+        """As :meth:`Runner.prepare`, then the config's ``serve:`` section (InputError)."""
+        super().prepare()
+        assert self.config is not None
+        settings = parse_section(self.config.config.serve, self.config.mark("serve"))
+        self.service.configure(self.mission, settings)
+        self.service.info.update(mission=getattr(self.mission, "name", ""), backend=self.config.backend)
+
+    def say(self, line: str) -> None:
+        """One line for the operator on the run's console (escaped; a console gone away is
+        written no more)."""
+        self._say(line)
+
+    def _validate_requests(self, mission: Any) -> list[dict[str, Any]]:
+        return []  # requests arrive through the service
+
+    def _total(self) -> int | None:
+        return None
+
+    def _next_request(self, served: int) -> tuple[int, dict[str, Any]] | None:
+        assert self.robot is not None and self.log is not None
+        svc = self.service
+        if served == 0:
+            self._started()
+        while True:
+            self._apply_commands()
+            if self.interrupted or self.stop_requested or self.log.error is not None:
+                return None
+            req = svc.take()
+            if req is not None:
+                self._apply_commands()  # its request_queued record comes before request_start
+                return req.id, req.fields
+            svc.set_state("idle", t=self.robot.clock.now(), tip="")
+            self._publish(self.robot)
+            if self.robot.clock.stepped:
+                svc.wait(IDLE_WAIT)
+            else:
+                self._spin(self.robot, self._period, self._interrupts, ending=False)
+
+    def _record(self, result: RequestResult, total: int | None) -> None:
+        self._served += 1
+        self._succeeded += result.ok
+        self.service.finished(result)
+        self._print_result(result, total)
+        self._publish_status()
+
+    def _end_queue(self) -> None:
+        self._apply_commands()
+        signum = self.signal
+        reason = "the service stopped" if signum is None else "the service was interrupted"
+        self.service.drop_all(reason)
+        self._apply_commands()
+        self.service.set_state("stopped")
+        self._publish_status()
+
+    def _started(self) -> None:
+        assert self.robot is not None and self.config is not None and self.log is not None
+        rate = self.options.rate_hz if self.options.rate_hz is not None else self.config.config.rate_hz
+        self._period = 1.0 / rate
+        self.service.info.update(backend=self.config.backend, log=str(self.log_path))
+        grid = self.robot.occupancy
+        if grid is not None:
+            self.service.hub.publish("map", {
+                "width": grid.width, "height": grid.height, "resolution": grid.resolution,
+                "origin": [grid.origin.x, grid.origin.y, grid.origin.theta],
+                "data": base64.b64encode(grid.data.astype("int8").tobytes()).decode("ascii")})
+
+    # tick thread: between ticks of a request, and while idle
+    def _between_ticks(self, robot: Robot, period: float) -> None:
+        self._apply_commands()
+        self.service.prompts.pace(robot, period)
+        self.service.set_state("running", t=robot.clock.now())
+        self._publish(robot)
+
+    def _apply_commands(self) -> None:
+        assert self.log is not None
+        elog = self.log
+        cmds = self.service.commands()
+        for cmd in cmds:
+            kind = cmd[0]
+            if kind == "queued":
+                elog.write("request_queued", id=cmd[1].id, request=cmd[1].fields)
+            elif kind == "dropped":
+                elog.write("request_dropped", id=cmd[1].id, request=cmd[1].fields, reason=cmd[2])
+            elif kind in ("paused", "resumed"):
+                elog.write(kind)
+            elif kind == "halt":
+                if self.service.current_id() == cmd[1]:
+                    self.halt_request(cmd[2])
+            elif kind == "stop":
+                elog.write("stop", reason=cmd[1])
+                self.request_stop()
+        if cmds:
+            self._publish_status()
+
+    def _on_record(self, record: dict[str, Any]) -> None:
+        hub = self.service.hub
+        hub.publish("event", record)
+        fed, ev = self.tree.feed(record), record.get("event")
+        if (fed and ev == "request_start") or (ev == "request_end" and self.tree.changed):
+            hub.publish("tree", self.tree.snapshot())
+
+    def _publish_status(self) -> None:
+        self.service.hub.publish("status", self.service.status())
+
+    def _publish(self, robot: Robot) -> None:
+        hub = self.service.hub
+        if self.tree.changed:
+            self.service.set_state(self.service.state, tip=self._tip())
+            hub.publish("tree", self.tree.snapshot())
+        s = self.service.settings
+        if self._is_due("status", STATUS_HZ):
+            self._publish_status()
+        if robot.base is not None and self._is_due("pose", s.pose_hz) and hub.wants("pose"):
+            st = robot.base.state()
+            hub.publish("pose", {"t": robot.clock.now(), "x": st.pose.x, "y": st.pose.y, "theta": st.pose.theta,
+                                 "v": st.v, "w": st.w})
+        path = self.world.get(WORLD_PATH)
+        if path is not self._last_path:
+            self._last_path = path
+            hub.publish("path", {"t": robot.clock.now(), "points": [[float(x), float(y)] for x, y in path or []]})
+        if robot.lidar is not None and self._is_due("scan", s.scan_hz) and hub.wants("scan"):
+            scan = robot.lidar.scan()
+            if scan is not None:
+                hub.publish("scan", {"t": scan.stamp, "angle_min": scan.angle_min,
+                                     "angle_increment": scan.angle_increment, "range_min": scan.range_min,
+                                     "range_max": scan.range_max, "ranges": _finite_or_none(scan.ranges)})
+        if robot.camera is not None and self._is_due("camera", s.camera_hz) and hub.wants("camera"):
+            frame = robot.camera.frame()
+            if frame is not None:
+                import cv2
+
+                ok, buf = cv2.imencode(".jpg", frame.rgb[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, STREAM_JPEG_QUALITY])
+                if ok:
+                    h, w = frame.rgb.shape[:2]
+                    hub.publish("camera", {"t": frame.stamp, "width": int(w), "height": int(h),
+                                           "jpeg": base64.b64encode(bytes(buf)).decode("ascii")})
+
+    def _tip(self) -> str:
+        running = [p for p in self.tree.order if self.tree.status.get(p) == "RUNNING"]
+        return running[-1] if running else ""
+
+    def _is_due(self, topic: str, hz: float) -> bool:
+        """Rate limit [wall Hz]: True at most ``hz`` times a second per topic."""
+        now = time.monotonic()
+        if now < self._due.get(topic, 0.0):
+            return False
+        self._due[topic] = now + 1.0 / hz
+        return True
