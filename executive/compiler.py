@@ -258,7 +258,7 @@ class MissionTree:
 
     def tip_path(self) -> str:
         """Path of the deepest RUNNING node ("" when nothing runs)."""
-        tip = N._tip(self.root)
+        tip = N.running_tip(self.root)
         return "" if tip is None else tip.path  # type: ignore[no-any-return]
 
     def nodes(self) -> list[Any]:

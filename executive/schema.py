@@ -18,10 +18,10 @@ from pathlib import Path
 from typing import Any
 
 from mmexec.config.yamlload import Mark, Problems, YDict, YList, did_you_mean, refuse_nonfinite
-from mmexec.executive.nodes import OPS
 from mmexec.executive.values import (
     KEY_RE,
     MAX_SECONDS,
+    OPS,
     Const,
     Expr,
     ParamRef,

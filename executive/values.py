@@ -9,17 +9,22 @@ it starts (:meth:`Expr.eval`).
 Syntax: a string that is exactly ``"{key}"`` is a reference (typed: it evaluates to the
 key's value); ``"text {key} text"`` is a template (evaluates to a string); ``{{`` and
 ``}}`` are literal braces.
+
+:data:`OPS` holds the operators a ``condition`` compares with (the schema checks a
+mission's ``op`` against it, the node applies it).
 """
 
 from __future__ import annotations
 
+import operator
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 __all__ = [
     "KEY_RE",
     "MAX_SECONDS",
+    "OPS",
     "Const",
     "DictExpr",
     "Expr",
@@ -33,12 +38,33 @@ __all__ = [
     "substitute",
 ]
 
-#: a blackboard key or parameter name: dotted identifiers (``request.item``, ``grasp.attempts``)
 #: longest wait or timeout a mission may give [clock s] (about 11.6 days)
 MAX_SECONDS = 1e6
 
+#: a blackboard key or parameter name: dotted identifiers (``request.item``, ``grasp.attempts``)
 KEY_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*(?:\.[A-Za-z0-9_\-]+)*")
 _TOKEN_RE = re.compile(r"\{\{|\}\}|\{([^{}]*)\}|[{}]")
+
+
+def _in(a: Any, b: Any) -> bool:
+    return a in b
+
+
+def _exists(a: Any, b: Any) -> bool:
+    return True
+
+
+#: condition operators: ``op(blackboard value, compared value) -> bool``
+OPS: dict[str, Callable[[Any, Any], bool]] = {
+    "==": operator.eq,
+    "!=": operator.ne,
+    "<": operator.lt,
+    "<=": operator.le,
+    ">": operator.gt,
+    ">=": operator.ge,
+    "in": _in,
+    "exists": _exists,
+}
 
 
 class MissingKey(KeyError):

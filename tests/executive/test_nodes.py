@@ -390,3 +390,19 @@ def test_tip_path_and_snapshot(h):
     t.tick()
     assert t.tip_path() == "fetch/approach/navigate"
     assert t.snapshot() == [("fetch", "RUNNING"), ("fetch/approach", "RUNNING"), ("fetch/approach/navigate", "RUNNING")]
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf"), 0.0, -1.0, 2e6])
+def test_timeout_refuses_a_blackboard_value_that_would_never_expire(h, value):
+    # as for wait: NaN never compares >= (the timeout never fired), inf never comes
+    t = h.tree("""
+        requests:
+          limit: {type: float}
+        tree:
+          timeout: {skill: succeed, params: {ticks: 3}}
+          seconds: "{request.limit}"
+    """, request={"limit": 1.0})
+    t.rt.bb["request.limit"] = value
+    assert h.run(t) == (F, 1)
+    assert "timeout: seconds must be a number > 0 and <= 1e+06" in t.rt.bb["last_failure"]
+    assert t.rt.bb["last_failure_kind"] == "precondition"
