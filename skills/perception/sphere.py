@@ -258,7 +258,11 @@ def fit_sphere(points: np.ndarray, config: SphereFitConfig, rng: np.random.Gener
         log.debug("sphere fit: no 4-point sample gives a radius in %s", config.radius_range)
         return None
     centres, radii = centres[ok], radii[ok]
-    res = np.abs(np.linalg.norm(sub[None, :, :] - centres[:, None, :], axis=2) - radii[:, None])
+    # |p - c|^2 = |p|^2 - 2 p.c + |c|^2 as one matrix product, about the points' mean
+    mean = sub.mean(axis=0)
+    q, cq = sub - mean, centres - mean
+    d2 = np.einsum("ij,ij->i", q, q)[None, :] - 2.0 * (cq @ q.T) + np.einsum("ij,ij->i", cq, cq)[:, None]
+    res = np.abs(np.sqrt(np.maximum(d2, 0.0)) - radii[:, None])
     extent = max(float(np.linalg.norm(np.ptp(sub, axis=0))), 10.0 * config.noise_sigma)
     costs = _mlesac_costs(res, config.noise_sigma, extent, config.em_steps)
     best = int(np.argmin(costs))

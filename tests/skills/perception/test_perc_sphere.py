@@ -138,3 +138,27 @@ def test_config_validation():
     assert len(errs) == 3
     with pytest.raises(ValueError, match="radius_range"):
         fit_sphere(np.zeros((50, 3)), SphereFitConfig(radius_range=(0.0, 0.1)), np.random.default_rng(0))
+
+
+def test_algorithm_1_2_from_a_detection():
+    """RGB-D view of a red ball in front of a grey wall: the colour detector's box and
+    the class' colour mask select the points, the fit finds the centre."""
+    from mmexec.skills.perception.detector import ColourBlobDetector, colour_mask
+
+    rng = np.random.default_rng(8)
+    c, r = np.array([0.12, 0.05, 0.7]), 0.04
+    ball = render_sphere_depth(K, c, r)
+    on = np.isfinite(ball)
+    depth = np.full(ball.shape, 1.2, np.float32)   # the wall behind
+    depth[on] = ball[on] + rng.normal(0, 0.0014, int(on.sum()))
+    # shade the ball by its normal's component towards the camera
+    pts = depth_to_points(ball, K)
+    shade = np.clip(-np.einsum("ij,ij->i", (pts - c) / r, pts / np.linalg.norm(pts, axis=1)[:, None]), 0, 1)
+    rgb = rng.integers(100, 140, (*ball.shape, 3)).astype(np.uint8)
+    rgb[on] = (np.outer(0.3 + 0.7 * shade, [200, 25, 30])).astype(np.uint8)
+    det = ColourBlobDetector()
+    (found,) = det.detect(rgb)
+    assert found.label == "apple"
+    mask = colour_mask(rgb, det.colours["apple"], found.box)
+    fit = fit_sphere(depth_to_points(depth, K, mask=mask, box=found.box), CFG, rng)
+    assert fit is not None and np.linalg.norm(fit.centre - c) < 0.002
