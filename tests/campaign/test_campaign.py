@@ -31,7 +31,7 @@ from mmexec.executive.campaign import (
     run_campaign,
     trial_seed,
 )
-from mmexec.executive.campaign_report import summarize, wilson_interval
+from mmexec.executive.campaign.report import summarize, wilson_interval
 
 HERE = Path(__file__).resolve().parent
 COIN = HERE / "coin.yaml"
@@ -345,19 +345,19 @@ def test_trial_timeout_kills_a_hung_trial(tmp_path: Path, skills_on_path: None) 
 def test_progress_line_on_a_terminal_and_plain_lines_otherwise() -> None:
     import io
 
-    from mmexec.executive.campaign import _CampaignProgress
+    from mmexec.executive.campaign.progress import CampaignProgress
 
     def result(i: int, outcome: str) -> TrialResult:
         return TrialResult(i, 10 + i, outcome, 1.5, 0.5, 0, "" if outcome == "success" else "boom")
 
     tty = io.StringIO()
-    p = _CampaignProgress(tty, total=4, done=[result(0, "success")], enabled=True)
+    p = CampaignProgress(tty, total=4, done=[result(0, "success")], enabled=True)
     p.add(result(1, "failure"))
     assert tty.getvalue().startswith("\r[2/4] 1 ok (50.0%), elapsed ") and "ETA " in tty.getvalue()
     p.finish()
     assert tty.getvalue().endswith("\r\x1b[K")
     plain = io.StringIO()
-    p = _CampaignProgress(plain, total=2, done=[], enabled=False)
+    p = CampaignProgress(plain, total=2, done=[], enabled=False)
     p.add(result(0, "error"))
     line = plain.getvalue()
     assert line.startswith("trial 0000 seed 10: error, 1.5 s clock, 0.5 s wall: boom  [1/2] 0 ok (0.0%), 1 errors")

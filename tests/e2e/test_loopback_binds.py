@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from mmexec.executive.campaign import LOOPBACK, RAY_SINGLE_MACHINE_ENV, _import_ray, _ray_init
+from mmexec.executive.campaign.pools import LOOPBACK, RAY_SINGLE_MACHINE_ENV, import_ray, ray_init
 
 HW = [sys.executable, "-m", "mmexec.drivers.hwcli"]
 TCP_LISTEN = "0A"
@@ -155,8 +155,8 @@ def test_a_local_ray_instance_listens_on_loopback_only() -> None:
     def worker_pid() -> int:  # nested: Ray ships it by value, the worker cannot import this module
         return os.getpid()
 
-    ray = _import_ray(local=True)
-    assert _ray_init(ray, 1, "")
+    ray = import_ray(local=True)
+    assert ray_init(ray, 1, "")
     try:
         assert ray.get(ray.remote(num_cpus=1)(worker_pid).remote()) != os.getpid()  # a worker is up
         addresses = listening(os.getpid())
@@ -172,9 +172,9 @@ def test_ray_imported_before_loopback_was_selected_is_refused() -> None:
     script = (
         "import ray\n"
         "from mmexec.config.yamlload import InputError\n"
-        "from mmexec.executive.campaign import _import_ray, _ray_init\n"
+        "from mmexec.executive.campaign.pools import import_ray, ray_init\n"
         "try:\n"
-        "    _ray_init(_import_ray(local=True), 1, '')\n"
+        "    ray_init(import_ray(local=True), 1, '')\n"
         "except InputError as e:\n"
         "    print(e)\n"
         "    print('initialized:', ray.is_initialized())\n"

@@ -33,7 +33,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from mmexec.executive.campaign import TrialResult
+from mmexec.executive.campaign.trial import TrialResult
 
 __all__ = ["Z95", "summarize", "wilson_interval", "write_outputs"]
 

@@ -1,0 +1,159 @@
+"""Fault profiles (``mmexec campaign --faults``): named sets of RFC 7396 merge patches
+for a run config's backend section. ``DIR/config.yaml`` is the user's config with one
+profile applied (:func:`apply_fault_profile`); the built-in profiles are
+:data:`FAULT_PROFILES`, anything else is a profile file (:func:`load_fault_profile`).
+docs/campaigns.md has the table of built-in profiles."""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from mmexec.config.yamlload import InputError, Mark, Problem, YDict, load_yaml
+from mmexec.executive.campaign.jsondata import plain
+from mmexec.executive.runner import ArgMark
+
+__all__ = ["FAULT_PROFILES", "NOMINAL", "FaultProfile", "apply_fault_profile", "load_fault_profile", "merge_patch"]
+
+
+def merge_patch(target: Any, patch: Any) -> Any:
+    """RFC 7396 JSON merge patch: a mapping patch merges key by key (recursively), a
+    ``None`` value deletes the key, anything else replaces the target. Returns a new
+    value; ``target`` is not modified."""
+    if not isinstance(patch, Mapping):
+        return copy.deepcopy(patch)
+    out: dict[str, Any] = dict(target) if isinstance(target, Mapping) else {}
+    for key, value in patch.items():
+        if value is None:
+            out.pop(key, None)
+        else:
+            out[key] = merge_patch(out.get(key), value)
+    return out
+
+
+@dataclass(frozen=True)
+class FaultProfile:
+    """A named set of merge patches for backend sections of a run config.
+
+    ``patches[backend]`` are applied in order to the config's ``<backend>:`` section
+    (:func:`merge_patch`); a backend with no entry cannot run this profile.
+    ``source`` is where it came from (``built-in`` or a file path)."""
+
+    name: str
+    description: str
+    patches: Mapping[str, tuple[Mapping[str, Any], ...]]
+    source: str = "built-in"
+
+
+#: Patches that switch every injected fault off (the ``nominal`` profile's content).
+NOMINAL: dict[str, dict[str, Any]] = {
+    "sim": {"faults": None},
+    "mock": {"arm": {"fail_moves": None}, "gripper": {"grasps": None, "fault_moves": None},
+             "base": {"blocked": None}, "camera": {"dropouts": None}},
+}
+
+
+def _profile(name: str, description: str, **specific: dict[str, Any]) -> FaultProfile:
+    """Nominal plus one fault, for the backends that ``specific`` names (all backends
+    with a nominal patch when it names none)."""
+    backends = list(specific) or list(NOMINAL)
+    patches = {b: (NOMINAL[b],) + ((specific[b],) if b in specific else ()) for b in backends}
+    return FaultProfile(name, description, patches)
+
+
+#: Built-in fault profiles (``--faults NAME``). Each starts from ``nominal`` (every fault
+#: of the config off, noise as configured) and adds one fault. ``config`` (the default)
+#: runs the config exactly as written.
+FAULT_PROFILES: dict[str, FaultProfile] = {
+    "config": FaultProfile("config", "the config's own faults section, unchanged",
+                           {"sim": (), "mock": (), "robot": ()}),
+    "nominal": _profile("nominal", "no injected faults; sensor and odometry noise as configured"),
+    "arm_fail_first": _profile(
+        "arm_fail_first", "the first arm attempt fails (sim: the first arm goal stops half-way and fails; "
+                          "mock: the first grasp closes on nothing)",
+        sim={"faults": {"arm_fail_attempts": [1]}}, mock={"gripper": {"grasps": [False]}}),
+    "arm_fail_second": _profile(
+        "arm_fail_second", "the second arm attempt fails (sim: arm goal 2, in fetch_item the pick's first move "
+                           "after the initial tuck; mock: the second grasp)",
+        sim={"faults": {"arm_fail_attempts": [2]}}, mock={"gripper": {"grasps": [True, False]}}),
+    "arm_fail_twice": _profile(
+        "arm_fail_twice", "the first two arm attempts fail (sim: arm goals 1 and 2; mock: grasps 1 and 2)",
+        sim={"faults": {"arm_fail_attempts": [1, 2]}}, mock={"gripper": {"grasps": [False, False]}}),
+    "arm_fail_always": _profile(
+        "arm_fail_always", "every arm attempt fails (sim: every arm goal; mock: every grasp)",
+        sim={"faults": {"arm_fail": "always"}}, mock={"gripper": {"default_grasp": False}}),
+    "sensor_dropout": _profile(
+        "sensor_dropout", "camera frames and lidar scans are missing with probability 0.2 (sim only)",
+        sim={"faults": {"camera_dropout": {"p": 0.2}, "lidar_dropout": {"p": 0.2}}}),
+    "nav_blocked": _profile(
+        "nav_blocked", "the base cannot move (mock only; for the sim name the items in a profile file: "
+                       "sim: {faults: {nav_blocked: [box_3]}})",
+        mock={"base": {"blocked": True}}),
+}
+
+
+def load_fault_profile(name_or_path: str) -> FaultProfile:
+    """A built-in profile by name, or a profile file: a YAML mapping with optional
+    ``description``, ``base: nominal|config`` (start from every fault off, the default,
+    or from the config as written) and one merge patch per backend name (``sim:``,
+    ``mock:``). InputError naming ``--faults`` or ``FILE:LINE:COL`` otherwise."""
+    if name_or_path in FAULT_PROFILES:
+        return FAULT_PROFILES[name_or_path]
+    path = Path(name_or_path)
+    if not (path.suffix in (".yaml", ".yml") or path.exists()):
+        raise InputError.at(ArgMark("--faults", 0, 0), f"unknown fault profile {name_or_path!r} (built-in: "
+                            f"{', '.join(FAULT_PROFILES)}; or a profile .yaml file)")
+    raw = load_yaml(path)
+    top = getattr(raw, "mark", Mark(str(path), 1, 1))
+    if not isinstance(raw, YDict):
+        raise InputError.at(top, "a fault profile is a mapping: {description: ..., sim: {faults: {...}}, mock: {...}}")
+    problems: list[Problem] = []
+    allowed = {"description", "base", "sim", "mock", "robot"}
+    for key in raw:
+        if key not in allowed:
+            problems.append(Problem(raw.key_mark(key) if hasattr(raw, "key_mark") else top,
+                                    f"unknown key {key!r} (expected: {', '.join(sorted(allowed))})"))
+    base = raw.get("base", "nominal")
+    if base not in ("nominal", "config"):
+        problems.append(Problem(raw.value_mark("base"), f"base: expected 'nominal' or 'config', got {base!r}"))
+    desc = raw.get("description", "")
+    if not isinstance(desc, str):
+        problems.append(Problem(raw.value_mark("description"), "description: expected a string"))
+    patches: dict[str, tuple[Mapping[str, Any], ...]] = {}
+    for backend in ("sim", "mock", "robot"):
+        if backend not in raw:
+            continue
+        value = raw[backend]
+        if not isinstance(value, YDict):
+            problems.append(Problem(raw.value_mark(backend), f"{backend}: expected a mapping (a merge patch "
+                                                             f"of the config's {backend}: section)"))
+            continue
+        start = (NOMINAL[backend],) if base == "nominal" and backend in NOMINAL else ()
+        patches[backend] = start + (plain(value),)
+    if not patches and not problems:
+        problems.append(Problem(top, "a fault profile needs at least one backend patch (sim:, mock: or robot:)"))
+    if problems:
+        raise InputError(problems)
+    return FaultProfile(path.stem, str(desc), patches, source=str(path))
+
+
+def apply_fault_profile(raw_config: Mapping[str, Any], profile: FaultProfile, *, randomize: bool) -> dict[str, Any]:
+    """The config mapping with ``profile`` applied to its backend's section (and, for the
+    sim, ``randomize`` set). InputError at ``--faults`` when the profile has nothing
+    for the config's backend."""
+    cfg = plain(raw_config)
+    backend = str(cfg.get("backend", ""))
+    if backend not in profile.patches:
+        raise InputError.at(ArgMark("--faults", 0, 0), f"fault profile {profile.name!r} has no patch for backend "
+                            f"{backend!r} (it has: {', '.join(profile.patches) or 'none'})")
+    section = cfg.get(backend) or {}
+    for patch in profile.patches[backend]:
+        section = merge_patch(section, patch)
+    if backend == "sim":
+        section["randomize"] = randomize
+    if section or backend in cfg:
+        cfg[backend] = section
+    return cfg

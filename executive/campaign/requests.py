@@ -1,0 +1,86 @@
+"""Which requests each trial serves (:class:`RequestPlan`): the same fixed requests for
+every trial, or fields drawn per trial with the trial's seed (``--draw``)."""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from mmexec.config.yamlload import InputError, Mark, Problem
+from mmexec.executive.runner import ArgMark
+
+__all__ = ["RequestPlan", "cli_value", "parse_draws"]
+
+
+@dataclass(frozen=True)
+class RequestPlan:
+    """How each trial's requests are chosen.
+
+    ``fixed``: the same requests for every trial (each a mapping of field to value).
+    ``draws``: ``{field: values}``: each trial serves ``per_trial`` requests, each field
+    drawn uniformly from its values with ``random.Random(trial_seed)`` (fields in sorted
+    order, one ``choice`` per field per request). Neither: one empty request."""
+
+    fixed: tuple[Mapping[str, Any], ...] = ()
+    draws: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)
+    per_trial: int = 1
+
+    def requests_for(self, seed: int) -> list[dict[str, Any]]:
+        if self.draws:
+            rng = random.Random(seed)
+            return [{k: rng.choice(self.draws[k]) for k in sorted(self.draws)} for _ in range(self.per_trial)]
+        return [dict(r) for r in self.fixed] or [{}]
+
+    def describe(self) -> str:
+        if self.draws:
+            parts = ", ".join(f"{k} from {list(v)}" for k, v in sorted(self.draws.items()))
+            return f"{self.per_trial} request(s) per trial, {parts}, drawn with the trial seed"
+        if self.fixed:
+            return "fixed: " + "; ".join(", ".join(f"{k}={v}" for k, v in r.items()) or "-" for r in self.fixed)
+        return "one empty request per trial"
+
+
+def cli_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def world_markers(cfg: Mapping[str, Any], mark: Mark) -> tuple[int, ...]:
+    if cfg.get("backend") != "sim":
+        raise InputError.at(mark, "@markers needs a sim config (the marker ids of the world's items)")
+    from mmexec.sim.world import load_world
+
+    world = load_world(str((cfg.get("sim") or {}).get("world", "lab")))
+    return tuple(it.marker for it in world.spec.items)
+
+
+def parse_draws(tokens: Sequence[str], cfg: Mapping[str, Any]) -> dict[str, tuple[Any, ...]]:
+    draws: dict[str, tuple[Any, ...]] = {}
+    problems: list[Problem] = []
+    for i, tok in enumerate(tokens, start=1):
+        mark = ArgMark("--draw", i, 1)
+        key, sep, value = tok.partition("=")
+        key = key.strip()
+        if not sep or not key or not value.strip():
+            problems.append(Problem(mark, f"expected FIELD=V1,V2,... or FIELD=@markers, got {tok!r}"))
+            continue
+        if key in draws:
+            problems.append(Problem(mark, f"field {key!r} drawn twice"))
+            continue
+        if value.strip() == "@markers":
+            try:
+                draws[key] = world_markers(cfg, mark)
+            except InputError as e:
+                problems.extend(e.problems)
+            continue
+        values = tuple(v.strip() for v in value.split(",") if v.strip())
+        if not values:
+            problems.append(Problem(mark, f"no values to draw {key!r} from"))
+            continue
+        draws[key] = values
+    if problems:
+        raise InputError(problems)
+    return draws
