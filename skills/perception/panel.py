@@ -24,9 +24,12 @@ Here:
   normal down to the switch travel plus a small overtravel, and the same waypoints
   reversed to release. The tool orientation is the grasp module's
   :func:`~mmexec.skills.manipulation.grasp.tool_rotation_in_marker` (approach axis into
-  the face), so a parallel gripper presses with its closed fingertips and our planner's
-  Cartesian follower, not MoveIt 2, executes the line. Put the tool frame at the
-  pressing tip (:meth:`ArmKinematics.with_tool_offset`).
+  the face), so a parallel gripper presses with its closed fingertips. Our planner, not
+  MoveIt 2, executes it: :meth:`ArmPlanner.plan_to_pose` to ``above``, then
+  :meth:`ArmPlanner.cartesian_path` (IK per waypoint, joint-jump and collision checks)
+  to the pressed pose and back; the waypoints are there for a follower that takes a
+  list and for checking every one in advance. Put the tool frame at the pressing tip
+  (:meth:`ArmKinematics.with_tool_offset`).
 
 Frames: the panel frame follows the marker convention of :mod:`.markers` (origin where
 the layout says, x right, y up, z out of the face towards the robot). Marker centres

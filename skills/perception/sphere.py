@@ -20,7 +20,7 @@ Here the same steps are plain numpy, vectorised over hypotheses:
   Zisserman 2000): the negative log-likelihood of a mixture of Gaussian inlier residuals
   (``noise_sigma``) and uniform outliers over the point set's extent, the mixing weight
   estimated by a few EM steps per hypothesis. Hypotheses are scored on a random subset
-  of at most ``max_points`` points (the full cloud adds time, not accuracy).
+  of at most ``max_points`` points; the refinement uses them all.
 * the refinement is Gauss-Newton on the geometric residual ``|p - c| - r`` over the
   inliers (re-selected once after the first refinement). Where we differ from the
   thesis: when the refined radius leaves ``radius_range`` (a small cap of a sphere fixes
