@@ -143,12 +143,14 @@ class PanelFit:
 
 
 def rigid_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation ``R`` (3x3, det +1) and translation ``t`` minimising
-    ``sum |R src_i + t - dst_i|^2`` (Kabsch / Umeyama without scale); (N, 3) each, N >= 3."""
+    """Rotation ``R`` (k x k, det +1, never a reflection) and translation ``t`` minimising
+    ``sum |R src_i + t - dst_i|^2`` (Kabsch / Umeyama without scale); ``src`` and ``dst``
+    (N, k) with k = 2 or 3 and N >= k."""
     cs, cd = src.mean(axis=0), dst.mean(axis=0)
     u, _, vt = np.linalg.svd((src - cs).T @ (dst - cd))
-    d = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    R = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    D = np.eye(src.shape[1])
+    D[-1, -1] = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
+    R = vt.T @ D @ u.T
     return R, cd - R @ cs
 
 

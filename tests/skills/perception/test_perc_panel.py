@@ -68,6 +68,12 @@ def test_rigid_fit_exact_and_proper_rotation():
     # a mirrored point set still gives a rotation (det +1), never a reflection
     R, _ = rigid_fit(src, src * [1, 1, -1])
     assert np.linalg.det(R) == pytest.approx(1.0)
+    # planar too
+    a = 0.7
+    R2 = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    R, t = rigid_fit(src[:, :2], src[:, :2] @ R2.T + [0.1, -0.2])
+    np.testing.assert_allclose(R, R2, atol=1e-12)
+    np.testing.assert_allclose(t, [0.1, -0.2], atol=1e-12)
 
 
 def test_exact_layout():
