@@ -545,9 +545,11 @@ class ServeRunner(Runner):
 
     def _on_record(self, record: dict[str, Any]) -> None:
         hub = self.service.hub
+        ev = record.get("event")
+        if ev == "request_end" and self.tree.changed:  # the final statuses before the end
+            hub.publish("tree", self.tree.snapshot())
         hub.publish("event", record)
-        fed, ev = self.tree.feed(record), record.get("event")
-        if (fed and ev == "request_start") or (ev == "request_end" and self.tree.changed):
+        if self.tree.feed(record) and ev == "request_start":
             hub.publish("tree", self.tree.snapshot())
 
     def _publish_status(self) -> None:
