@@ -55,7 +55,7 @@ from mmexec.executive.schema import (
     recovery_key_prefix,
     type_compatible,
 )
-from mmexec.executive.values import Const, Expr, substitute
+from mmexec.executive.values import Const, Expr, format_problem, substitute
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
 __all__ = [
@@ -531,6 +531,11 @@ def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY, roots: It
             have = writes.get(key)
             if key in writes and not type_compatible(want, have):
                 problems.add(mark, f"{prefix}, but {raw!r} is {have.__name__ if have else '?'}")
+        for key, spec, mark, prefix in s.formatted_reads:
+            have = writes.get(key)
+            problem = format_problem(spec, have) if have is not None else None
+            if have is not None and problem is not None:
+                problems.add(mark, f"{prefix}: {problem} (blackboard key {key!r} is {have.__name__})")
         if s is not top:
             for r, d in s.requests.items():
                 if r not in top.requests:

@@ -24,10 +24,12 @@ from mmexec.executive.values import (
     OPS,
     Const,
     Expr,
+    Format,
     ParamRef,
     Ref,
     Template,
     ValueSyntaxError,
+    format_problem,
     parse_value,
 )
 from mmexec.skills.base import Param, SkillRegistry, SkillSpec
@@ -138,6 +140,9 @@ class FileSpec:
     typed_reads: list[tuple[str, type, Mark, str, Any]] = field(default_factory=list)
     #: recovery nodes of this file (not of the files it includes), innermost first
     recoveries: list[NodeSpec] = field(default_factory=list)
+    #: blackboard reads with a format spec, checked once every write's type is known:
+    #: (key, spec, mark, message prefix)
+    formatted_reads: list[tuple[str, str, Mark, str]] = field(default_factory=list)
 
 
 def _tname(value: Any) -> str:
@@ -198,6 +203,7 @@ class _Parser:
         self.includes: list[NodeSpec] = []
         self.recoveries: list[NodeSpec] = []
         self.typed_reads: list[tuple[str, type, Mark, str, Any]] = []
+        self.formatted_reads: list[tuple[str, str, Mark, str]] = []
         self.handlers: dict[str, Callable[[NodeSpec, YDict, Any, Mark, int], None]] = {
             k: getattr(self, "n_" + k) for k in NODE_TYPES
         }
@@ -237,7 +243,7 @@ class _Parser:
         for r in requests:
             self.writes[f"request.{r}"] = requests[r].type
         return FileSpec(self.path, name, desc, self.params, requests, tree, doc.mark, self.reads, self.writes,
-                        self.includes, self.typed_reads, self.recoveries)
+                        self.includes, self.typed_reads, self.recoveries, self.formatted_reads)
 
     def decls(self, doc: YDict, key: str, allow_default: bool) -> dict[str, ParamDecl]:
         out: dict[str, ParamDecl] = {}
@@ -310,7 +316,22 @@ class _Parser:
             return None
         for key in e.reads():
             self.reads.append((key, mark))
+        for f in e.formats():
+            self.check_format(f, mark, what)
         return e
+
+    def check_format(self, f: Format, mark: Mark, what: str) -> None:
+        """Check a ``{key:spec}`` against the key's type: a parameter's now, a blackboard
+        key's once the compiler knows every write (a type known only at run time is
+        checked by the node, which fails with kind precondition)."""
+        inner = f.expr
+        if isinstance(inner, Ref):
+            self.formatted_reads.append((inner.key, f.spec, mark, what))
+            return
+        d = self.params.get(inner.name) if isinstance(inner, ParamRef) else None
+        problem = format_problem(f.spec, d.type) if d is not None else None
+        if d is not None and problem is not None:
+            self.err(mark, f"{what}: {problem} (parameter {d.name!r} is {d.type.__name__})")
 
     def static_type(self, e: Expr) -> type | None:
         """Type of ``e`` known before run time, or None."""
@@ -319,7 +340,7 @@ class _Parser:
         if isinstance(e, ParamRef):
             d = self.params.get(e.name)
             return d.type if d else None
-        if isinstance(e, Template):
+        if isinstance(e, (Template, Format)):
             return str
         return None
 

@@ -8,7 +8,9 @@ it starts (:meth:`Expr.eval`).
 
 Syntax: a string that is exactly ``"{key}"`` is a reference (typed: it evaluates to the
 key's value); ``"text {key} text"`` is a template (evaluates to a string); ``{{`` and
-``}}`` are literal braces.
+``}}`` are literal braces. A reference may carry a Python format spec,
+``{heading:.2f}`` (:class:`Format`: it evaluates to the formatted string); the spec is
+checked when the value is parsed (:func:`format_problem`).
 
 :data:`OPS` holds the operators a ``condition`` compares with (the schema checks a
 mission's ``op`` against it, the node applies it).
@@ -23,17 +25,22 @@ from typing import Any
 
 __all__ = [
     "KEY_RE",
+    "MAX_FORMAT_WIDTH",
     "MAX_SECONDS",
     "OPS",
+    "BadFormat",
     "Const",
     "DictExpr",
+    "EvalError",
     "Expr",
+    "Format",
     "ListExpr",
     "MissingKey",
     "ParamRef",
     "Ref",
     "Template",
     "ValueSyntaxError",
+    "format_problem",
     "parse_value",
     "substitute",
 ]
@@ -44,6 +51,16 @@ MAX_SECONDS = 1e6
 #: a blackboard key or parameter name: dotted identifiers (``request.item``, ``grasp.attempts``)
 KEY_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_\-]*(?:\.[A-Za-z0-9_\-]+)*")
 _TOKEN_RE = re.compile(r"\{\{|\}\}|\{([^{}]*)\}|[{}]")
+#: Python's format spec: [[fill]align][sign][z][#][0][width][grouping][.precision][type]
+_SPEC_RE = re.compile(r"(?:.?[<>=^])?[-+ ]?z?#?0?(?P<width>\d+)?[_,]?(?:\.(?P<precision>\d+))?[bcdeEfFgGnosxX%]?", re.DOTALL)
+_SPEC_SYNTAX = "[[fill]align][sign][z][#][0][width][grouping][.precision][type], e.g. '.2f'"
+#: largest width or precision a format spec may ask for [characters]
+MAX_FORMAT_WIDTH = 1000
+#: a value of each declared type that a format spec is tried on (a float spec must
+#: also format an int: an int is accepted where a float is declared)
+_SAMPLES: dict[type, tuple[Any, ...]] = {
+    int: (0,), float: (0.0, 0), str: ("",), bool: (False,), list: ([],), dict: ({},),
+}
 
 
 def _in(a: Any, b: Any) -> bool:
@@ -67,12 +84,67 @@ OPS: dict[str, Callable[[Any, Any], bool]] = {
 }
 
 
-class MissingKey(KeyError):
+class EvalError(Exception):
+    """A mission value that cannot be evaluated on the blackboard as it is now;
+    ``reason`` says why (the node fails with kind precondition)."""
+
+    reason = ""
+
+
+class MissingKey(EvalError, KeyError):
     """A blackboard key read before anything wrote it."""
 
     def __init__(self, key: str) -> None:
         super().__init__(key)
         self.key = key
+        self.reason = f"blackboard key {key!r} is not set (nothing wrote it yet)"
+
+
+class BadFormat(EvalError, ValueError):
+    """A value that its reference's format spec cannot format (``{heading:.2f}`` of a string)."""
+
+    def __init__(self, what: str, value: Any, spec: str, error: Exception) -> None:
+        super().__init__(what, value, spec)
+        self.reason = f"{what} = {_short(value)} cannot be formatted with ':{spec}' ({error})"
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:60] + "..."
+
+
+def _a(tp: type) -> str:
+    """``an int``, ``a float``: the type's name with its article."""
+    return ("an " if tp.__name__[0] in "aeiou" else "a ") + tp.__name__
+
+
+def format_problem(spec: str, tp: type | None = None) -> str | None:
+    """Why format spec ``spec`` is unusable for a value of declared type ``tp`` (None:
+    a type not known yet, then some type must accept it), or None when it is usable."""
+    m = _SPEC_RE.fullmatch(spec)
+    if m is None:
+        return f"bad format spec ':{spec}' (expected {_SPEC_SYNTAX})"
+    for part in ("width", "precision"):
+        n = m.group(part)
+        if n is not None and int(n) > MAX_FORMAT_WIDTH:
+            return f"format spec ':{spec}': {part} {n} is more than the limit of {MAX_FORMAT_WIDTH}"
+    samples = _SAMPLES.get(tp, ()) if tp is not None else (0, 0.0, "")
+    errors: list[tuple[Any, str]] = []
+    for sample in samples:
+        try:
+            format(sample, spec)
+        except (TypeError, ValueError) as e:
+            errors.append((sample, f"{e}"))
+    if not errors or (tp is None and len(errors) < len(samples)):
+        return None
+    sample, error = errors[0]
+    if tp is None:
+        what = "any value"
+    elif type(sample) is tp:
+        what = _a(tp)
+    else:
+        what = f"{_a(type(sample))} (accepted as {_a(tp)})"
+    return f"format spec ':{spec}' cannot format {what}: {error}"
 
 
 class ValueSyntaxError(ValueError):
@@ -93,6 +165,10 @@ class Expr:
 
     def params(self) -> list[str]:
         """Parameter names this value refers to (before substitution)."""
+        return []
+
+    def formats(self) -> list[Format]:
+        """The formatted references in this value (``{key:spec}``)."""
         return []
 
 
@@ -165,6 +241,49 @@ class Template(Expr):
     def params(self) -> list[str]:
         return [k for p in self.parts if isinstance(p, Expr) for k in p.params()]
 
+    def formats(self) -> list[Format]:
+        return [f for p in self.parts if isinstance(p, Expr) for f in p.formats()]
+
+
+class Format(Expr):
+    """``format(value, spec)`` of a reference: ``{heading:.2f}`` (evaluates to a string)."""
+
+    __slots__ = ("expr", "spec", "static")
+
+    def __init__(self, expr: Expr, spec: str) -> None:
+        self.expr = expr
+        self.spec = spec
+        self.static = expr.static
+
+    def apply(self, value: Any) -> str:
+        """``value`` formatted with the spec; BadFormat when the spec does not fit it."""
+        try:
+            return format(value, self.spec)
+        except (TypeError, ValueError) as e:
+            raise BadFormat(self.label(), value, self.spec, e) from None
+
+    def label(self) -> str:
+        """What is formatted, for messages: ``blackboard key 'heading'``."""
+        e = self.expr
+        if isinstance(e, Ref):
+            return f"blackboard key {e.key!r}"
+        return f"parameter {e.name!r}" if isinstance(e, ParamRef) else "the value"
+
+    def eval(self, bb: Mapping[str, Any]) -> Any:
+        return self.apply(self.expr.eval(bb))
+
+    def reads(self) -> list[str]:
+        return self.expr.reads()
+
+    def params(self) -> list[str]:
+        return self.expr.params()
+
+    def formats(self) -> list[Format]:
+        return [self]
+
+    def __repr__(self) -> str:
+        return f"Format({self.expr!r}, {self.spec!r})"
+
 
 class ListExpr(Expr):
     __slots__ = ("items", "static")
@@ -181,6 +300,9 @@ class ListExpr(Expr):
 
     def params(self) -> list[str]:
         return [k for i in self.items for k in i.params()]
+
+    def formats(self) -> list[Format]:
+        return [f for i in self.items for f in i.formats()]
 
 
 class DictExpr(Expr):
@@ -199,6 +321,9 @@ class DictExpr(Expr):
     def params(self) -> list[str]:
         return [k for i in self.items.values() for k in i.params()]
 
+    def formats(self) -> list[Format]:
+        return [f for i in self.items.values() for f in i.formats()]
+
 
 def _parse_string(s: str, is_param: Any) -> Expr:
     parts: list[str | Expr] = []
@@ -215,14 +340,19 @@ def _parse_string(s: str, is_param: Any) -> Expr:
         elif tok in ("{", "}"):
             raise ValueSyntaxError(f"unbalanced {tok!r} in {s!r} (write '{tok * 2}' for a literal brace)")
         else:
-            name = m.group(1).strip()
+            name, colon, spec = m.group(1).partition(":")
+            name = name.strip()
             if not KEY_RE.fullmatch(name):
-                raise ValueSyntaxError(f"bad reference {tok!r} in {s!r} (expected {{key}}, e.g. {{request.item}})")
+                raise ValueSyntaxError(f"bad reference {tok!r} in {s!r} (expected {{key}} or {{key:spec}}, e.g. {{request.item}})")
+            problem = format_problem(spec) if colon else None
+            if problem is not None:
+                raise ValueSyntaxError(f"{problem} in {tok!r}")
             lit = "".join(text)
             text = []
             if lit:
                 parts.append(lit)
-            parts.append(ParamRef(name) if is_param(name) else Ref(name))
+            ref: Expr = ParamRef(name) if is_param(name) else Ref(name)
+            parts.append(Format(ref, spec) if colon else ref)
     text.append(s[pos:])
     tail = "".join(text)
     if tail:
@@ -260,6 +390,9 @@ def substitute(expr: Expr, env: Mapping[str, Expr]) -> Expr:
         return env[expr.name]
     if isinstance(expr, (Const, Ref)):
         return expr
+    if isinstance(expr, Format):
+        inner = substitute(expr.expr, env)
+        return Const(expr.apply(inner.value)) if isinstance(inner, Const) else Format(inner, expr.spec)
     if isinstance(expr, Template):
         parts: list[str | Expr] = []
         for p in expr.parts:

@@ -18,7 +18,7 @@ from mmexec.executive.nodes.behaviour import (
     Runtime,
     clock_seconds,
 )
-from mmexec.executive.values import OPS, Const, Expr, MissingKey
+from mmexec.executive.values import OPS, Const, EvalError, Expr
 from mmexec.skills.base import (
     FailureKind,
     SkillContext,
@@ -69,7 +69,7 @@ class Wait(_Leaf):
 
 class Condition(_Leaf):
     """SUCCESS when ``bb[key] <op> value`` holds; FAILURE otherwise (also when the key is
-    not set, or the values cannot be compared)."""
+    not set, a value cannot be formatted, or the values cannot be compared)."""
 
     def __init__(self, rt: Runtime, path: str, name: str, key: str, op: str, value: Expr) -> None:
         super().__init__(rt, path, name)
@@ -84,9 +84,7 @@ class Condition(_Leaf):
             return FAILURE
         try:
             ok = self._fn(bb[self.key], self.value.eval(bb))
-        except MissingKey:
-            return FAILURE
-        except TypeError:
+        except (EvalError, TypeError):
             return FAILURE
         return SUCCESS if ok else FAILURE
 
@@ -145,14 +143,9 @@ class SkillLeaf(_Leaf):
             else:
                 try:
                     params = {k: v.eval(self.rt.bb) for k, v in self.params.items()}
-                except MissingKey as e:
+                except EvalError as e:
                     self.rt.emit("skill_start", self.path, skill=self.spec.name)
-                    return self._failed(
-                        SkillFailure(
-                            FailureKind.PRECONDITION,
-                            f"{self.spec.name}: blackboard key {e.key!r} is not set (nothing wrote it yet)",
-                        )
-                    )
+                    return self._failed(SkillFailure(FailureKind.PRECONDITION, f"{self.spec.name}: {e.reason}"))
             run = self.run = SkillRun(self.spec, self._skill_ctx(), params)
             self.rt.emit("skill_start", self.path, skill=self.spec.name)
             try:

@@ -33,7 +33,8 @@ TOKENS = [b"sequence:", b"fallback:", b"parallel:", b"retry:", b"timeout:", b"re
           b"condition:", b"wait:", b"skill:", b"include:", b"recovery:", b"params:", b"outputs:", b"tree:",
           b"- ", b"  ", b"\n", b"{", b"}", b"[", b"]", b"&a ", b"*a", b"\"{x}\"", b"{request.item}", b"!!str",
           b"!!python/object:x", b"\xff", b"\x00", b"---\n", b"include: ../malformed/unknown_skill.yaml",
-          b"include: m.yaml", b"max_recoveries: -1", b"policy: 7", b": ", b"1e999", b"~", b"<<: *a"]
+          b"include: m.yaml", b"max_recoveries: -1", b"policy: 7", b": ", b"1e999", b"~", b"<<: *a",
+          b"\"{x:.2f}\"", b"{request.item:03d}", b":.2q", b":99999999", b"{x:}"]
 REG = corpus_registry()
 TMP = Path(tempfile.mkdtemp(prefix="mmexec-fuzz-"))
 
