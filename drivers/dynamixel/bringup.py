@@ -52,7 +52,11 @@ from mmexec.drivers.dynamixel.bus import (
     ServoError,
 )
 from mmexec.drivers.dynamixel.codec import StatusResult
-from mmexec.drivers.dynamixel.control_table import MODELS, decode_hardware_error
+from mmexec.drivers.dynamixel.control_table import (
+    MODELS,
+    baud_rate_problem,
+    decode_hardware_error,
+)
 
 __all__ = [
     "LINK_WARN_RATIO",
@@ -103,7 +107,13 @@ HW_ERROR_STATUS = 70  # address of Hardware Error Status (X series)
 
 def add_ping_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--port", required=True, help="serial port of the U2D2, e.g. /dev/ttyDXL")
-    parser.add_argument("--baud", type=int, default=1_000_000, help="bit/s (default 1000000)")
+    parser.add_argument(
+        "--baud",
+        type=int,
+        default=1_000_000,
+        help="bit/s: 9600, 57600, 115200, 1000000, 2000000, 3000000, 4000000 or 4500000 "
+        "(default 1000000)",
+    )
     parser.add_argument("--ids", default="1-9", help="ids to ping, e.g. 1-9 or 1,2,4 (default 1-9)")
     parser.add_argument(
         "--latency-ms",
@@ -210,6 +220,9 @@ def ping(args: argparse.Namespace) -> int:
     port = args.port
     try:
         ids = parse_ids(args.ids)
+        problem = baud_rate_problem(args.baud)
+        if problem:
+            raise ValueError(f"--baud: {problem}")
         cfg = BusConfig(port, int(args.baud), float(args.latency_ms) / 1000.0)
         if not 1 <= args.attempts <= _MAX_COUNT:
             raise ValueError(f"--attempts must be in 1..{_MAX_COUNT}, got {args.attempts}")

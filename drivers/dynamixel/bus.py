@@ -18,6 +18,7 @@ status packet reporting an error is :class:`ServoError`; both derive from
 from __future__ import annotations
 
 import logging
+import math
 import os
 import select
 import threading
@@ -28,7 +29,7 @@ from typing import Self
 
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.codec import BROADCAST_ID, BadFrame, Status, StatusResult
-from mmexec.drivers.dynamixel.control_table import decode_hardware_error
+from mmexec.drivers.dynamixel.control_table import baud_rate_problem, decode_hardware_error
 from mmexec.drivers.transport import LinkClosed, LinkError, SerialSettings, SerialTransport
 
 __all__ = [
@@ -167,18 +168,20 @@ class DxlSerialTransport(SerialTransport):
 
 @dataclass(frozen=True)
 class BusConfig:
-    """Bus settings: ``port`` path, ``baudrate`` [bit/s], ``latency`` [s] of the adapter
-    (USB latency timer plus Return Delay Time); reply deadlines derive from these."""
+    """Bus settings: ``port`` path, ``baudrate`` [bit/s, one of the DYNAMIXEL rates 9600 ..
+    4.5M], ``latency`` [s] of the adapter (USB latency timer plus Return Delay Time); reply
+    deadlines derive from these. ValueError names a bad value."""
 
     port: str
     baudrate: int = 1_000_000
     latency: float = 0.001
 
     def __post_init__(self) -> None:
-        if self.baudrate <= 0:
-            raise ValueError(f"baudrate must be > 0, got {self.baudrate}")
-        if self.latency < 0:
-            raise ValueError(f"latency must be >= 0 s, got {self.latency}")
+        problem = baud_rate_problem(self.baudrate)
+        if problem:
+            raise ValueError(f"baudrate: {problem}")
+        if not (math.isfinite(self.latency) and self.latency >= 0):
+            raise ValueError(f"latency must be a finite number >= 0 s, got {self.latency}")
 
 
 @dataclass(frozen=True)

@@ -18,14 +18,20 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 __all__ = [
+    "BAUD_RATES",
+    "BUS_WATCHDOG_MAX",
+    "BUS_WATCHDOG_TRIPPED",
+    "BUS_WATCHDOG_UNIT_S",
     "HARDWARE_ERROR_BITS",
     "MODELS",
     "TWO_XL430_W250",
+    "WATCHDOG_MIN_FIRMWARE",
     "Access",
     "Area",
     "Model",
     "OperatingMode",
     "Register",
+    "baud_rate_problem",
     "current_to_amps",
     "decode_hardware_error",
     "load_to_fraction",
@@ -45,6 +51,38 @@ AMPS_PER_CURRENT_UNIT = 2.69e-3
 FRACTION_PER_LOAD_UNIT = 1e-3
 VOLTS_PER_UNIT = 0.1
 PWM_FRACTION_PER_UNIT = 0.00113
+
+
+#: Baud Rate register (address 8) value -> bit/s (X series, Protocol 2.0; ROBOTIS e-Manual)
+BAUD_RATES: dict[int, int] = {
+    0: 9600,
+    1: 57600,
+    2: 115200,
+    3: 1_000_000,
+    4: 2_000_000,
+    5: 3_000_000,
+    6: 4_000_000,
+    7: 4_500_000,
+}
+
+#: Bus Watchdog (address 98): seconds per unit; largest value (127 x 20 ms = 2.54 s); the value
+#: it reads after it fired (goal writes then answer data range error until 0 is written);
+#: the first firmware that has it (ROBOTIS e-Manual)
+BUS_WATCHDOG_UNIT_S = 0.020
+BUS_WATCHDOG_MAX = 127
+BUS_WATCHDOG_TRIPPED = -1
+WATCHDOG_MIN_FIRMWARE = 38
+
+
+def baud_rate_problem(baudrate: object) -> str:
+    """Why ``baudrate`` [bit/s] cannot be used on an X-series bus ("" when it can: one of
+    the values of the Baud Rate register, :data:`BAUD_RATES`, from the ROBOTIS e-Manual)."""
+    if isinstance(baudrate, int) and not isinstance(baudrate, bool) and (
+        baudrate in BAUD_RATES.values()
+    ):
+        return ""
+    rates = ", ".join(str(b) for b in BAUD_RATES.values())
+    return f"{baudrate!r} bit/s is not a DYNAMIXEL baud rate (one of {rates})"
 
 
 class Access(enum.Enum):

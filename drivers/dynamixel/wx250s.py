@@ -56,9 +56,14 @@ from mmexec.drivers.dynamixel.bus import (
 )
 from mmexec.drivers.dynamixel.codec import Status, StatusResult
 from mmexec.drivers.dynamixel.control_table import (
+    BUS_WATCHDOG_MAX,
+    BUS_WATCHDOG_TRIPPED,
+    BUS_WATCHDOG_UNIT_S,
     MODELS,
+    WATCHDOG_MIN_FIRMWARE,
     Model,
     OperatingMode,
+    baud_rate_problem,
     current_to_amps,
     decode_hardware_error,
     load_to_fraction,
@@ -119,6 +124,15 @@ GOAL_POSITION = 116
 GOAL_PWM = 100
 TORQUE_ENABLE = 64
 HW_ERROR = 70
+BUS_WATCHDOG = 98
+BUS_WATCHDOG_UNIT_MS = round(BUS_WATCHDOG_UNIT_S * 1000)
+#: PWM Limit (address 36) of the gripper servo: the factory value, which bring-up keeps
+GRIPPER_PWM_LIMIT = 885
+#: operating modes whose last goal is an effort that goes on while the host is silent (the
+#: servo keeps pushing or turning): the Bus Watchdog is armed on servos in these modes. In the
+#: position modes the servo holds its last goal by itself, which is the safe state; a fired
+#: watchdog there would only make the next goals (Sync Write, no status) vanish unnoticed.
+WATCHDOG_MODES = frozenset({OperatingMode.PWM, OperatingMode.VELOCITY, OperatingMode.CURRENT})
 
 # --------------------------------------------------------------------------- one control cycle
 
@@ -191,13 +205,23 @@ class CycleIO:
 class WX250sConfig:
     """Driver settings. Times in seconds unless the name says ms; angles in rad.
 
-    ``latency``: USB adapter latency (1 ms for the U2D2 with the Interbotix udev rule);
+    ``baudrate``: one of the DYNAMIXEL rates (9600 .. 4.5M bit/s, the Baud Rate register's
+    table); ``latency``: USB adapter latency (1 ms for the U2D2 with the Interbotix udev rule);
     ``profile_velocity_ms`` / ``profile_acceleration_ms``: the time-based profile written to
     the arm servos. Interbotix uses 2000 / 300 ms for single set-point moves; this driver
     streams interpolated waypoints every cycle, so a 100 ms profile (the servo reaches each
     streamed set-point 0.1 s later, smoothly) is the default. ``shutdown_mask``: Shutdown
     register value; 0x3D makes all five named faults cut torque and raise the alert bit the
     driver watches (factory 0x34 would leave input voltage and encoder faults unreported).
+    ``bus_watchdog_ms``: the Bus Watchdog armed on the servos driven by an effort rather than
+    a position (the gripper in PWM mode): with no instruction for that long the servo zeroes
+    its goal and stops. 0 leaves it off; else 20 .. 2540 in steps of 20 ms, and long enough
+    for 3 control cycles plus 4 reply deadlines (:meth:`min_bus_watchdog_ms`), so normal
+    traffic never lets it fire. None (default): 100 ms, or that minimum rounded up to 20 ms
+    when the link is slower (:attr:`watchdog_ms`).
+
+    Construction checks every value (:meth:`problems`) and raises one ValueError naming each
+    bad field, so the robot backend reports it at the arm's config section.
     """
 
     port: str = "/dev/ttyDXL"
@@ -215,6 +239,7 @@ class WX250sConfig:
     torque_off_on_close: bool = False
     shutdown_mask: int = 0x3D
     reboot_timeout: float = 1.0
+    bus_watchdog_ms: int | None = None
     gripper_pwm_min: int = 150
     gripper_pwm_max: int = 350
     gripper_max_force: float = 5.0
@@ -223,17 +248,92 @@ class WX250sConfig:
     gripper_timeout: float = 3.0
 
     def __post_init__(self) -> None:
-        if self.rate_hz <= 0 or self.rate_hz > 1000:
-            raise ValueError(f"rate_hz must be in (0, 1000], got {self.rate_hz}")
-        if self.ping_attempts < 1:
-            raise ValueError("ping_attempts must be >= 1")
-        if (
-            not 0 <= self.profile_acceleration_ms * 2 <= max(self.profile_velocity_ms, 0)
-            or self.profile_velocity_ms < 0
-        ):
-            raise ValueError(
-                "time-based profile needs 0 <= 2 * profile_acceleration_ms <= profile_velocity_ms"
+        bad = self.problems()
+        if bad:
+            raise ValueError("; ".join(f"{name}: {message}" for name, message in bad))
+
+    def min_bus_watchdog_ms(self) -> float:
+        """The shortest Bus Watchdog [ms] that normal traffic refreshes in time: 3 control
+        periods plus 4 reply deadlines (a cycle with failed exchanges; derived)."""
+        reply_s = 2.0 * self.latency + 0.002
+        return 1000.0 * (3.0 / self.rate_hz + 4.0 * reply_s)
+
+    def problems(self) -> list[tuple[str, str]]:
+        """(field, message) for every unusable value; empty when the config is usable."""
+        out: list[tuple[str, str]] = []
+        problem = baud_rate_problem(self.baudrate)
+        if problem:
+            out.append(("baudrate", problem))
+        if not (math.isfinite(self.latency) and 0.0 <= self.latency <= 1.0):
+            out.append(("latency", f"must be 0..1 s, got {self.latency}"))
+        if not 0 < self.rate_hz <= 1000:
+            out.append(("rate_hz", f"must be in (0, 1000], got {self.rate_hz}"))
+        if not 1 <= self.ping_attempts <= 100:
+            out.append(("ping_attempts", f"must be 1..100, got {self.ping_attempts}"))
+        if not 1 <= self.max_missed_cycles <= 1000:
+            out.append(("max_missed_cycles", f"must be 1..1000, got {self.max_missed_cycles}"))
+        if not 0 <= self.profile_velocity_ms <= 32767:
+            out.append(("profile_velocity_ms", f"must be 0..32767 ms, got {self.profile_velocity_ms}"))
+        elif not 0 <= 2 * self.profile_acceleration_ms <= self.profile_velocity_ms:
+            msg = (
+                "time-based profile needs 0 <= 2 * profile_acceleration_ms <= profile_velocity_ms, "
+                f"got {self.profile_acceleration_ms} and {self.profile_velocity_ms}"
             )
+            out.append(("profile_acceleration_ms", msg))
+        if not 0 <= self.shutdown_mask <= 0xFF:
+            out.append(("shutdown_mask", f"must be a byte 0..255, got {self.shutdown_mask}"))
+        for name in (
+            "tolerance",
+            "settle_timeout",
+            "reboot_timeout",
+            "gripper_max_force",
+            "gripper_width_tolerance",
+            "gripper_timeout",
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                out.append((name, f"must be a finite number > 0, got {value}"))
+        if not 0 < self.gripper_load_threshold <= 1:
+            msg = f"must be in (0, 1] (fraction of max torque), got {self.gripper_load_threshold}"
+            out.append(("gripper_load_threshold", msg))
+        if not 0 <= self.gripper_pwm_min <= self.gripper_pwm_max <= GRIPPER_PWM_LIMIT:
+            msg = (
+                f"need 0 <= gripper_pwm_min <= gripper_pwm_max <= {GRIPPER_PWM_LIMIT} (the "
+                f"servo's PWM Limit), got {self.gripper_pwm_min} and {self.gripper_pwm_max}"
+            )
+            out.append(("gripper_pwm_max", msg))
+        wd, unit = self.watchdog_ms, BUS_WATCHDOG_UNIT_MS
+        top = BUS_WATCHDOG_MAX * unit
+        if wd != 0 and (not unit <= wd <= top or wd % unit):
+            msg = f"must be 0 (off) or {unit}..{top} ms in steps of {unit} ms, got {wd}"
+            if self.bus_watchdog_ms is None:
+                msg = f"the {wd} ms this link needs is above {top} ms: set bus_watchdog_ms: 0"
+            out.append(("bus_watchdog_ms", msg))
+        elif wd != 0 and not out and wd < self.min_bus_watchdog_ms():
+            msg = (
+                f"{wd} ms would fire during normal traffic at rate_hz {self.rate_hz:g} and "
+                f"latency {self.latency:g} s: use at least {self.min_bus_watchdog_ms():.0f} ms "
+                "(3 control cycles plus 4 reply deadlines)"
+            )
+            out.append(("bus_watchdog_ms", msg))
+        return out
+
+    @property
+    def watchdog_ms(self) -> int:
+        """The Bus Watchdog period [ms] in use: ``bus_watchdog_ms``, or when None the larger
+        of 100 ms and :meth:`min_bus_watchdog_ms` rounded up to 20 ms (0 = off)."""
+        if self.bus_watchdog_ms is not None:
+            return self.bus_watchdog_ms
+        unit = BUS_WATCHDOG_UNIT_MS
+        need = self.min_bus_watchdog_ms() if self.rate_hz > 0 else 0.0
+        if not math.isfinite(need):
+            return 0
+        return max(100, unit * math.ceil(need / unit))
+
+    @property
+    def bus_watchdog_units(self) -> int:
+        """The Bus Watchdog register value (20 ms units; 0 = off)."""
+        return self.watchdog_ms // BUS_WATCHDOG_UNIT_MS
 
 
 def _detail(e: Exception | None) -> str:
@@ -310,6 +410,14 @@ class WX250s:
         self._link_error = ""
         self._connected = False
         self._io: CycleIO | None = None
+        #: servos whose Bus Watchdog is armed (effort-driven modes, see WATCHDOG_MODES)
+        self.watchdog_ids: tuple[int, ...] = (
+            tuple(j.id for j in self.all_joints if self._mode_of(j) in WATCHDOG_MODES)
+            if config.bus_watchdog_units
+            else ()
+        )
+        #: Bus Watchdog trips seen and cleared since construction (diagnostics)
+        self.watchdog_trips = 0
         self._arm = WX250sArm(self)
         self._gripper = WX250sGripper(self)
 
@@ -343,6 +451,11 @@ class WX250s:
         ids = set(self.read_ids)
         ids.update(j.shadow for j in self.all_joints if j.shadow is not None)
         return sorted(ids)
+
+    @staticmethod
+    def _mode_of(j: JointSpec) -> OperatingMode:
+        """Operating Mode the bring-up writes: PWM for the gripper, position for the rest."""
+        return OperatingMode.PWM if j is GRIPPER else OperatingMode.POSITION
 
     def _model_of(self, dxl_id: int) -> Model:
         if dxl_id in self.by_id:
@@ -405,6 +518,14 @@ class WX250s:
                     f"{bus.port}: servo id {dxl_id} ({self.name_of[dxl_id]}) is {name} ({got}), "
                     f"expected {want.name} ({want.number})"
                 )
+            fw = self.found[dxl_id].firmware
+            if dxl_id in self.watchdog_ids and fw < WATCHDOG_MIN_FIRMWARE:
+                raise DynamixelError(
+                    f"{bus.port}: servo id {dxl_id} ({self.name_of[dxl_id]}) has firmware {fw}, "
+                    f"which has no Bus Watchdog (firmware {WATCHDOG_MIN_FIRMWARE} or later): "
+                    "update it with DYNAMIXEL Wizard, or set bus_watchdog_ms: 0"
+                )
+
         def retry(call: Callable[..., _T], *args: object) -> _T:
             """One configuration exchange, repeated (``ping_attempts`` in all) when its reply
             is missing or corrupt: the writes are idempotent, and one lost status on a noisy
@@ -423,6 +544,10 @@ class WX250s:
         for dxl_id in ids:
             retry(bus.write, dxl_id, TORQUE_ENABLE, b"\x00")
         for dxl_id in ids:
+            # Bus Watchdog off, which also clears a watchdog error left from before (a link
+            # lost while armed): until then every goal write would answer data range error
+            retry(bus.write, dxl_id, BUS_WATCHDOG, b"\x00")
+        for dxl_id in ids:
             if retry(bus.read, dxl_id, HW_ERROR, 1)[0]:
                 raise HardwareFault(
                     bus.port,
@@ -432,11 +557,11 @@ class WX250s:
                 )
         for j in self.all_joints:
             arm_group = j in ARM_JOINTS
-            mode = OperatingMode.PWM if j is GRIPPER else OperatingMode.POSITION
             drive = (0x01 if j.reversed else 0) | (0x04 if arm_group else 0)
             targets = [(j.id, drive, 255)]
             if j.shadow is not None:
                 targets.append((j.shadow, drive | 0x01, j.id))
+            mode = self._mode_of(j)
             for dxl_id, dmode, secondary in targets:
                 if cfg.write_eeprom:
                     retry(bus.write, dxl_id, 9, b"\x00")  # Return Delay Time 0
@@ -465,6 +590,10 @@ class WX250s:
             retry(bus.write, j.id, GOAL_POSITION, codec.int_to_le(p, 4))
         for dxl_id in ids:
             retry(bus.write, dxl_id, TORQUE_ENABLE, b"\x01")
+        for dxl_id in self.watchdog_ids:
+            # armed last: it watches only while torque is on, and the I/O thread's Sync Read
+            # (every cycle, this id included) refreshes it from now on
+            retry(bus.write, dxl_id, BUS_WATCHDOG, bytes((cfg.bus_watchdog_units,)))
         with self._lock:
             self._goals_pulses = goals
             self._sent_goals = list(goals)
@@ -492,6 +621,10 @@ class WX250s:
                 if self.config.torque_off_on_close:
                     for dxl_id in self.servo_ids():
                         self.bus.write(dxl_id, TORQUE_ENABLE, b"\x00")
+                for dxl_id in self.watchdog_ids:
+                    # off (and any trip cleared): the next program on this bus, or our next
+                    # connect(), finds goal writes accepted
+                    self.bus.write(dxl_id, BUS_WATCHDOG, b"\x00")
                 if self._grip_pwm:
                     self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
             except DynamixelError as e:
@@ -621,7 +754,9 @@ class WX250s:
                         targets = [i for i in self.servo_ids() if self.bus.read(i, HW_ERROR, 1)[0]]
                     for i in targets:
                         self.bus.reboot(i)
-                    state["targets"], state["since"] = targets, time.monotonic()
+                    # the reboot goal's deadline is on the injected clock (a goal deadline, not
+                    # a link reply deadline: each ping has its own, on wall time, in DxlBus)
+                    state["targets"], state["since"] = targets, self.clock.now()
                 assert isinstance(targets, list)
                 for i in targets:
                     try:
@@ -629,7 +764,7 @@ class WX250s:
                     except (NoReply, DxlLinkError, ServoError) as e:
                         if isinstance(e, LinkLost):
                             raise
-                        waited = time.monotonic() - float(state["since"])  # type: ignore[arg-type]
+                        waited = self.clock.now() - float(state["since"])  # type: ignore[arg-type]
                         if waited > reboot_timeout:
                             goal.fail(
                                 f"servo id {i} ({self.name_of.get(i, i)}) did not come back "
@@ -663,6 +798,11 @@ class WX250s:
                 with self._lock:
                     self._goals_pulses[self.position_joints.index(j)] = p
             self.bus.write(i, TORQUE_ENABLE, b"\x01")
+            if i in self.watchdog_ids:
+                # a Reboot resets RAM: Goal PWM 0 and the Bus Watchdog off; arm it again
+                self.bus.write(i, BUS_WATCHDOG, bytes((self.config.bus_watchdog_units,)))
+            if i == GRIPPER.id:
+                self._grip_pwm = 0
         with self._lock:
             for i in targets:
                 self._faults.pop(i, None)
@@ -728,6 +868,8 @@ class WX250s:
 
     # -- I/O thread
     def _run(self) -> None:
+        # paced on wall time, not the injected clock: the cycle is the bus traffic that
+        # refreshes the servos' Bus Watchdog, which counts real milliseconds
         period = 1.0 / self.config.rate_hz
         next_t = time.monotonic()
         try:
@@ -808,6 +950,7 @@ class WX250s:
                 self._fail_running(f"{e}{who} for {self._missed} cycles")
         with self._lock:
             self._update_state(readings)
+        self._check_watchdog()
         alerts = [i for i, r in readings.items() if r.error & codec.ALERT_BIT]
         if alerts:
             self._on_alerts(alerts)
@@ -905,9 +1048,75 @@ class WX250s:
         if run is not None and not run.sent:
             want = run.pwm
             run.sent = True
+            if self._grip_pwm == 0 and self._watchdog_tripped(GRIPPER.id):
+                # fired while the gripper was idle (nothing was pushing, so nothing to
+                # undo); cleared before the goal write, which it would refuse
+                log.warning(
+                    "%s: servo id %d (gripper): Bus Watchdog had fired while idle; clearing it",
+                    self.bus.port,
+                    GRIPPER.id,
+                )
+                try:
+                    self._rearm_watchdog(GRIPPER.id)
+                except (NoReply, CorruptReply) as e:
+                    # the goal write below is then refused, and this cycle's check fails
+                    # the goal naming the watchdog
+                    log.warning("%s: could not clear the Bus Watchdog: %s", self.bus.port, e)
         if want != self._grip_pwm:
             self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(want, 2))])
             self._grip_pwm = want
+
+    # -- Bus Watchdog (servos in WATCHDOG_MODES; the I/O thread only)
+    def _watchdog_tripped(self, dxl_id: int) -> bool:
+        """True when ``dxl_id``'s Bus Watchdog reads -1 (fired). A missing or corrupt reply
+        counts as not known to have fired (the next check asks again)."""
+        if dxl_id not in self.watchdog_ids:
+            return False
+        try:
+            value = self.bus.read(dxl_id, BUS_WATCHDOG, 1)
+        except LinkLost:
+            raise
+        except (NoReply, CorruptReply) as e:
+            log.debug("%s: Bus Watchdog check skipped: %s", self.bus.port, e)
+            return False
+        return codec.int_from_le(value, signed=True) == BUS_WATCHDOG_TRIPPED
+
+    def _rearm_watchdog(self, dxl_id: int) -> None:
+        """Write 0 (clears the watchdog error: goal writes are accepted again), then arm it."""
+        self.bus.write(dxl_id, BUS_WATCHDOG, b"\x00")
+        self.bus.write(dxl_id, BUS_WATCHDOG, bytes((self.config.bus_watchdog_units,)))
+        self.watchdog_trips += 1
+
+    def _check_watchdog(self) -> None:
+        """Every cycle while the gripper is driven (Goal PWM not 0): did its Bus Watchdog fire?
+
+        It fires when the host sent nothing for ``bus_watchdog_ms`` (a stalled host, a link
+        gap); the servo then zeroed its Goal PWM. A running gripper move FAILS naming the
+        watchdog (it is not resumed behind the caller's back; the caller may retry); a
+        squeeze held on a grasped object (the goal already succeeded) is restored. Either
+        way the watchdog is cleared and armed again.
+        """
+        if self._grip_pwm == 0 or not self._watchdog_tripped(GRIPPER.id):
+            return
+        cfg = self.config
+        reason = (
+            f"{self.bus.port}: servo id {GRIPPER.id} (gripper): Bus Watchdog fired (no "
+            f"instruction for more than {cfg.watchdog_ms} ms): the gripper stopped"
+        )
+        with self._lock:
+            run, self._grip = self._grip, None
+        squeeze = self._grip_pwm if run is None else 0
+        if run is not None:
+            run.goal.fail(f"{reason}; the move was abandoned")
+        log.warning("%s%s", reason, "; squeeze restored" if squeeze else "")
+        try:
+            self._rearm_watchdog(GRIPPER.id)
+            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(squeeze, 2))])
+        except (NoReply, CorruptReply) as e:
+            # the watchdog still reads -1: the next goal write (or, while squeezing, the
+            # next cycle's check) clears it again
+            log.warning("%s: could not clear the Bus Watchdog yet: %s", self.bus.port, e)
+        self._grip_pwm = squeeze
 
     def _check_gripper(self, now: float) -> None:
         cfg = self.config

@@ -33,8 +33,17 @@ Fault switches (attributes or methods on :class:`FakeDxlBus`):
   answers with error 3 if ``crc_error_reply`` is True, else stays silent (which one real
   X-series firmware does is unconfirmed, so the driver is tested both ways);
 * ``reboot_time``: seconds a servo stays silent while it restarts after a Reboot;
-* Bus Watchdog: armed by writing address 98; expires after that many 20 ms without an
-  instruction (or at once with :meth:`FakeDxlBus.expire_watchdog`).
+* Bus Watchdog (address 98, ROBOTIS e-Manual): armed with 1-127 (x 20 ms) while torque is on,
+  it fires when no instruction packet reached the servo for longer than that: the servo
+  stops (Goal PWM, Goal Velocity and Goal Current become 0, a position mode holds where it
+  is; torque stays on), the register reads -1 and goal writes answer data range error
+  until 0 is written to it. The motion model runs up to the moment it fired, so the
+  position shows how far the servo went after the host fell silent; the fake's own tick
+  (every 10 ms) and :meth:`FakeDxlBus.register` advance it without any traffic.
+  :meth:`FakeDxlBus.expire_watchdog` fires it at once. Which packets refresh it: the
+  e-Manual counts "all the Instruction Packet"; whether one addressed to other ids counts is
+  unconfirmed, so the fake takes the stricter reading: only a packet that addresses the
+  servo (its id or secondary id, broadcast, or listed in a Sync/Bulk Read/Write).
 * and the :class:`~mmexec.drivers.fakes.pty.PtyDevice` switches: ``silent``, ``unplug()``, ``inject()``.
 """
 
@@ -46,8 +55,17 @@ import time
 from collections.abc import Iterable, Sequence
 
 from mmexec.drivers.dynamixel import codec
-from mmexec.drivers.dynamixel.codec import BROADCAST_ID, BadFrame, Instruction, Packet, StatusResult
+from mmexec.drivers.dynamixel.codec import (
+    BROADCAST_ID,
+    BadFrame,
+    CodecError,
+    Instruction,
+    Packet,
+    StatusResult,
+)
 from mmexec.drivers.dynamixel.control_table import (
+    BUS_WATCHDOG_TRIPPED,
+    BUS_WATCHDOG_UNIT_S,
     XL430_W250,
     XM430_W350,
     Area,
@@ -155,7 +173,12 @@ class FakeServo:
         self._t0 = 0.0
         self._dur = 0.0
         self._last = time.monotonic()
-        self._last_instruction = self._last
+        #: time.monotonic() of the last instruction packet that addressed this servo, and
+        #: its present position [pulses] then
+        self.last_instruction = self._last
+        self.position_at_last_instruction = self.pos
+        #: times the Bus Watchdog fired, and the position [pulses] each time it did
+        self.watchdog_fires: list[tuple[float, float]] = []
         self.registered: tuple[int, bytes] | None = None
         self._store_motion()
 
@@ -204,13 +227,21 @@ class FakeServo:
         return float(v if v > 0 else 1023)
 
     def update(self, now: float) -> None:
+        """Advance to ``now`` (time.monotonic()); a Bus Watchdog that expired on the way
+        fires at its moment, with the motion before it and the stop after it."""
+        wd = self.get("bus_watchdog")
+        if wd > 0 and self.torque:
+            expiry = self.last_instruction + wd * BUS_WATCHDOG_UNIT_S
+            if expiry < now:
+                self._move(max(expiry, self._last))
+                self._watchdog_fire(max(expiry, self._last))
+        self._move(now)
+
+    def _move(self, now: float) -> None:
         dt = now - self._last
         if dt <= 0.0:
             return
         self._last = now
-        wd = self.get("bus_watchdog")
-        if wd > 0 and self.torque and now - self._last_instruction > wd * 0.020:
-            self._watchdog_fire(now)
         mode = self.get("operating_mode")
         if not self.torque:
             self.vel, self.load = 0.0, 0
@@ -275,10 +306,18 @@ class FakeServo:
         self._dur = 0.0
         self._set("goal_position", round(self.pos))
 
-    def _watchdog_fire(self, now: float) -> None:
-        self.hold(now)
-        self._set("bus_watchdog", -1)
-        self._set("torque_enable", 0)
+    def _watchdog_fire(self, when: float) -> None:
+        """The Bus Watchdog fires (motion already advanced to ``when``): the servo stops,
+        torque stays on, the register reads -1 (e-Manual, Bus Watchdog)."""
+        for name in ("goal_pwm", "goal_velocity", "goal_current"):
+            if self.model.has(name):
+                self._set(name, 0)
+        self._goal = self._from = self.pos
+        self._dur = 0.0
+        self.vel = 0.0
+        self._store_motion()
+        self._set("bus_watchdog", BUS_WATCHDOG_TRIPPED)
+        self.watchdog_fires.append((when, self.pos))
 
     def fault(self, bits: int, now: float) -> None:
         self.update(now)
@@ -351,7 +390,10 @@ class FakeServo:
         return 0
 
     def touch(self, now: float) -> None:
-        self._last_instruction = now
+        """An instruction packet addressed this servo (refreshes its Bus Watchdog); call
+        after :meth:`update` to ``now``."""
+        self.last_instruction = now
+        self.position_at_last_instruction = self.pos
 
     def factory_reset(self, option: int, now: float) -> None:
         self.update(now)
@@ -404,6 +446,9 @@ def wx250s_servos(
 class FakeDxlBus(PtyDevice):
     """A multidrop bus of :class:`FakeServo` on a pty (see the module docstring)."""
 
+    #: the servos run (motion, Bus Watchdog) on this tick too, not only when packets arrive
+    tick_period = 0.01
+
     def __init__(
         self,
         servos: Iterable[FakeServo] | None = None,
@@ -455,16 +500,31 @@ class FakeDxlBus(PtyDevice):
             self.servo(dxl_id).fault(encode_hardware_error(faults), time.monotonic())
 
     def expire_watchdog(self, dxl_id: int) -> None:
+        """Fire ``dxl_id``'s Bus Watchdog now (as if its period had just run out)."""
+        with self._mlock:
+            s = self.servo(dxl_id)
+            now = time.monotonic()
+            s.update(now)
+            s._watchdog_fire(now)
+
+    def register(self, dxl_id: int, name: str) -> int:
+        """``name``'s value in servo ``dxl_id`` now: its motion and Bus Watchdog advanced to
+        this moment (a test observing the servo while the host sends nothing)."""
         with self._mlock:
             s = self.servo(dxl_id)
             s.update(time.monotonic())
-            s._watchdog_fire(time.monotonic())
+            return s.get(name)
 
     def set_obstacle(self, dxl_id: int, pulses: int | None) -> None:
         with self._mlock:
             self.servo(dxl_id).obstacle = pulses
 
     # -- device side
+    def on_tick(self, now: float) -> None:
+        with self._mlock:
+            for s in self.servos:
+                s.update(now)
+
     def on_bytes(self, data: bytes) -> None:
         with self._mlock:
             for item in self._parser.feed(data):
@@ -517,9 +577,11 @@ class FakeDxlBus(PtyDevice):
             return
         if len(self.instructions) < 10000:
             self.instructions.append((item.id, item.instruction))
+        ids = _addressed_ids(item)
         for s in self.servos:
             s.update(now)  # a Bus Watchdog expires on the gap before this instruction
-            s.touch(now)
+            if ids is None or s.id in ids or s.secondary_id in ids:
+                s.touch(now)
         handler = _HANDLERS.get(item.instruction)
         if handler is None:
             for s, replies in self._addressed(item.id):
@@ -658,6 +720,23 @@ class FakeDxlBus(PtyDevice):
         for s, replies in self._addressed(p.id):
             if replies:
                 self._reply(s, err)
+
+
+def _addressed_ids(p: Packet) -> set[int] | None:
+    """Ids an instruction addresses (None: every servo, a broadcast); a Sync or Bulk
+    instruction addresses the ids it lists (none if its parameters do not parse)."""
+    try:
+        if p.instruction in (Instruction.SYNC_READ, Instruction.SYNC_WRITE):
+            if p.instruction == Instruction.SYNC_READ:
+                return set(codec.parse_sync_read(p.params)[2])
+            return set(codec.parse_sync_write(p.params)[2])
+        if p.instruction == Instruction.BULK_READ:
+            return {i for i, _, _ in codec.parse_bulk_read(p.params)}
+        if p.instruction == Instruction.BULK_WRITE:
+            return {i for i, _, _ in codec.parse_bulk_write(p.params)}
+    except CodecError:
+        return set()
+    return None if p.id == BROADCAST_ID else {p.id}
 
 
 _HANDLERS = {

@@ -5,10 +5,11 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from dxl_helpers import until, wait
 
 from mmexec.drivers.dynamixel.bus import (
     CorruptReply,
@@ -26,7 +27,7 @@ from mmexec.drivers.dynamixel.wx250s import (
     gripper_width,
 )
 from mmexec.drivers.fakes.dynamixel import FakeDxlBus, wx250s_servos
-from mmexec.drivers.interfaces import Goal, GoalState, GraspState, JointTrajectory
+from mmexec.drivers.interfaces import GoalState, GraspState, JointTrajectory
 
 TEST_LATENCY = 0.05  # as in conftest.py: reply deadlines of ~100 ms on a loaded 2-core machine
 
@@ -34,26 +35,13 @@ NAMES = ("waist", "shoulder", "elbow", "forearm_roll", "wrist_angle", "wrist_rot
 HOME = (0.0, -0.5, 0.5, 0.0, 0.3, 0.0)
 
 
-def wait(goal: Goal, timeout: float) -> float:
-    """Poll a goal like a tick loop would; return the seconds it took."""
-    t0 = time.monotonic()
-    while not goal.done():
-        assert time.monotonic() - t0 < timeout, f"{goal} not done within {timeout} s"
-        time.sleep(0.005)
-    return time.monotonic() - t0
-
-
-def until(pred: Callable[[], bool], timeout: float = 2.0) -> bool:
-    """Poll ``pred`` until true or ``timeout`` s of real time pass (bounded, never fixed)."""
-    deadline = time.monotonic() + timeout
-    while not pred():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.005)
-    return True
+#: the Bus Watchdog for the generous TEST_LATENCY: WX250sConfig wants at least 3 cycles plus
+#: 4 reply deadlines (438 ms at 50 ms latency); a loaded machine gets the same margin again
+TEST_WATCHDOG_MS = 1000
 
 
 def cfg(port: str, **kw: object) -> WX250sConfig:
+    kw.setdefault("bus_watchdog_ms", TEST_WATCHDOG_MS)
     return WX250sConfig(port=port, latency=TEST_LATENCY, **kw)  # type: ignore[arg-type]
 
 
