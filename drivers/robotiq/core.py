@@ -15,6 +15,13 @@ Goal deadlines (activation, moves, stops) and state stamps read the injected
 :class:`~mmexec.drivers.interfaces.Clock` (the wall clock on the robot); only the link's own
 reply deadlines, which bound a wait on a port, are wall time.
 
+A move that fails because the link failed (no answer, corrupt frames, e-stop, port lost) is
+abandoned, but the gripper may still be going to its position: when the link answers again
+(by itself, or through :meth:`RobotiqDevice.reconnect`), the first command written is a stop
+(rGTO = 0, as :meth:`RobotiqDevice.stop`), provided the gripper reports a move in effect
+(gACT = 1 and gGTO = 1: a reset or power-cycled gripper gets nothing, since rACT = 1 would
+start an activation). So the fingers do not finish a move the caller has given up on.
+
 A move asked for while activation runs (the :meth:`RobotiqDevice.activate` goal, or a gripper
 reporting gSTA = 1) is not refused: its goal waits, nothing written, and the I/O thread
 starts it once gSTA = 3; it fails with one line if the activation fails or has not finished
@@ -158,6 +165,9 @@ class RobotiqDevice(abc.ABC):
         self._dropped = False
         self._move_cmd: Command | None = None
         self._move_seq = 0
+        # a move failed with the link: stop the fingers once it answers again (until written)
+        self._stop_on_recovery = False
+        self._recovery_stop: Command | None = None
         self._thread: threading.Thread | None = None
         self._stop_evt = threading.Event()
         self._stats = LinkStats()
@@ -222,6 +232,7 @@ class RobotiqDevice(abc.ABC):
             self._link_state = LinkState.CONNECTED
             self._link_error = None
             self._failures = 0
+            self._stop_abandoned_move(status)
         self._thread = threading.Thread(target=self._run, name=f"{self.where}-io", daemon=True)
         self._thread.start()
         log.info("%s: open, status %s", self.where, status)
@@ -238,8 +249,8 @@ class RobotiqDevice(abc.ABC):
         if thread is not None:
             thread.join(timeout=5.0)
         with self._lock:
-            moving = any(t.kind in ("move", "release") and not t.goal.done()
-                         for t in self._tracks)
+            moving = self._recovery_stop is not None or any(
+                t.kind in ("move", "release") and not t.goal.done() for t in self._tracks)
             stop = self._stop_command() if moving and self._link_state is LinkState.CONNECTED \
                 else None
             tracks, self._tracks = self._tracks, []
@@ -556,6 +567,24 @@ class RobotiqDevice(abc.ABC):
     def _on_written(self, cmd: Command) -> None:
         if self._move_cmd is not None and cmd is self._move_cmd:
             self._held = self._dropped = False
+        if cmd is self._recovery_stop:
+            self._stop_on_recovery = False
+            self._recovery_stop = None
+
+    def _stop_abandoned_move(self, status: Status) -> None:
+        """The link answers again after a move failed with it (lock held): queue a stop
+        first, unless the gripper reports no move in effect (see the module docstring)."""
+        if not self._stop_on_recovery or self._recovery_stop is not None:
+            return
+        if not (status.gACT and status.gGTO):
+            self._stop_on_recovery = False  # reset, power-cycled or already stopped
+            return
+        last = self._last_cmd or self._move_cmd or Command(rACT=True)  # after reconnect(): None
+        self._recovery_stop = Command(rACT=True, rGTO=False, rPR=last.rPR, rSP=last.rSP,
+                                      rFR=last.rFR)
+        self._enqueue(self._recovery_stop)
+        log.warning("%s: answering again after a failed move: stopping the fingers (rGTO = 0) "
+                    "so they do not finish it", self.where)
 
     def _on_link_problem(self, state: LinkState, err: RobotiqError, *, fail_now: bool) -> None:
         with self._lock:
@@ -568,10 +597,13 @@ class RobotiqDevice(abc.ABC):
             self._link_state = state
             self._link_error = err
             msg = str(err) if fail_now else f"{err} ({self._failures} tries)"
+            if any(t.kind in ("move", "stop") and not t.goal.done() for t in self._tracks):
+                self._stop_on_recovery = True
             for t in self._tracks:
                 t.goal.fail(msg)
             self._tracks.clear()
             self._queue.clear()
+            self._recovery_stop = None  # dropped with the queue; queued again on recovery
 
     def _accept(self, status: Status) -> None:
         """Record a fresh status (lock held)."""
@@ -583,6 +615,7 @@ class RobotiqDevice(abc.ABC):
             log.info("%s: answering again", self.where)
             self._link_state = LinkState.CONNECTED
             self._link_error = None
+            self._stop_abandoned_move(status)
         mc = self._move_cmd
         if (mc is not None and self._seq >= self._move_seq and status.gPR == mc.rPR
                 and status.gSTA == 3 and status.gGTO):
