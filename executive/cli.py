@@ -37,7 +37,15 @@ try:  # Ctrl-C while the command is still importing (a tenth of a second) exits 
     from typing import Any, NoReturn
 
     from mmexec.config.brokenpipe import detach_stdout
-    from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
+    from mmexec.config.yamlload import (
+        InputError,
+        Mark,
+        Problem,
+        YDict,
+        YList,
+        did_you_mean,
+        load_yaml,
+    )
     from mmexec.executive.runner import SEED_RANGE, ArgMark, BackendStartError
     from mmexec.executive.textsafe import printable
 except KeyboardInterrupt:
@@ -77,6 +85,10 @@ def _parser() -> argparse.ArgumentParser:
     v = sub.add_parser("validate", help="check a mission (exit 0 valid, 2 problems)")
     v.add_argument("mission", type=Path)
     v.add_argument("--config", type=Path, help="also load its skill modules and check the robot has what the skills need")
+
+    k = sub.add_parser("skills", help="list the skills a mission can use: parameters, units, defaults, needs")
+    k.add_argument("names", nargs="*", metavar="NAME", help="only these skills (default: all)")
+    k.add_argument("--config", type=Path, help="also load this config's skill modules (skills.modules)")
 
     s = sub.add_parser("show", help="print the compiled tree; export it as Graphviz dot / SVG")
     s.add_argument("mission", type=Path)
@@ -335,11 +347,29 @@ def _check_binding(mission: Any, loaded: Any) -> None:
 # --------------------------------------------------------------------------- commands
 
 
-def _cmd_validate(args: argparse.Namespace) -> int:
+#: Added to an unknown skill's problem when no ``--config`` was given: only the built-in
+#: skills are known then.
+_CONFIG_HINT = "; a skill from your own modules needs --config CONFIG (its skills.modules are loaded first)"
+
+
+def _load_mission(args: argparse.Namespace, *, check_profile: bool = True) -> tuple[Any, Any]:
+    """The config (None without ``--config``) with its skill modules loaded, and the
+    mission; without ``--config`` an unknown skill's problem says to pass one."""
     from mmexec.executive.compiler import load_mission
 
-    loaded = _load_for_mission(args.config, check_profile=False)  # the binding check reports it with the rest
-    mission = load_mission(args.mission, roots=loaded.roots if loaded is not None else ())
+    loaded = _load_for_mission(args.config, check_profile=check_profile)
+    try:
+        mission = load_mission(args.mission, roots=loaded.roots if loaded is not None else ())
+    except InputError as e:
+        if loaded is not None:
+            raise
+        raise InputError(Problem(p.mark, p.message + _CONFIG_HINT) if p.message.startswith("unknown skill ") else p
+                         for p in e.problems) from None
+    return loaded, mission
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    loaded, mission = _load_mission(args, check_profile=False)  # the binding check reports it with the rest
     if loaded is not None:
         _check_binding(mission, loaded)
     print(printable(f"{args.mission}: ok ({mission.node_count} nodes"
@@ -347,10 +377,24 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_skills(args: argparse.Namespace) -> int:
+    """``mmexec skills``: the skill catalogue (:mod:`mmexec.executive.catalog`)."""
+    from mmexec.executive.catalog import catalogue
+    from mmexec.skills.base import REGISTRY
+
+    loaded = _load_for_mission(args.config, check_profile=False)  # listing needs the modules, not the profile
+    problems = [Problem(ArgMark("mmexec skills", i, 1), f"unknown skill {name!r}{did_you_mean(name, REGISTRY.names())}"
+                        + ("" if loaded is not None else _CONFIG_HINT))
+                for i, name in enumerate(args.names, start=1) if name not in REGISTRY]
+    if problems:
+        raise InputError(problems)
+    text = catalogue(REGISTRY, source=None if loaded is None else str(loaded.path), names=args.names or None)
+    print(printable(text, multiline=True))
+    return EXIT_OK
+
+
 def _cmd_show(args: argparse.Namespace) -> int:
     import importlib
-
-    from mmexec.executive.compiler import load_mission
 
     try:
         display = importlib.import_module("mmexec.executive.display")
@@ -360,8 +404,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
         raise UsageError("mmexec show: tree display is not available in this installation "
                          "(module mmexec.executive.display not found)") from None
 
-    loaded = _load_for_mission(args.config)
-    mission = load_mission(args.mission, roots=loaded.roots if loaded is not None else ())
+    _, mission = _load_mission(args)
     tree = mission.display_tree()
     print(printable(display.render_text(tree), multiline=True))
     for path, writer in ((args.dot, display.write_dot), (args.svg, display.write_svg)):
@@ -621,6 +664,8 @@ def _command(args: argparse.Namespace, argv: list[str]) -> int:
         return _cmd_validate(args)
     if args.command == "show":
         return _cmd_show(args)
+    if args.command == "skills":
+        return _cmd_skills(args)
     if args.command == "run":
         return _cmd_run(args, argv)
     if args.command == "log":

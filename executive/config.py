@@ -12,6 +12,8 @@ A run config is YAML loaded through :mod:`mmexec.config.yamlload` and bound into
       home: [0.0, 0.0, 0.0]                      #   (mmexec.skills.profile), checked at load
     skills:
       modules: [my_lab.skills]   # user skill modules to import (the ONLY way user code loads)
+      paths: [.]                 # folders put in front of the import path first (relative to
+                                 #   this file, inside its folder tree or a root)
     roots: [../shared]           # more folders includes and sim worlds may come from
 
 No number in a config may be NaN or infinite (:func:`~mmexec.config.yamlload.bind`).
@@ -26,7 +28,8 @@ import hashlib
 import importlib
 import logging
 import os
-from collections.abc import Callable, Mapping
+import sys
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -51,6 +54,7 @@ __all__ = [
     "LoadedConfig",
     "RunConfig",
     "SkillsConfig",
+    "add_import_paths",
     "backend_builder",
     "build_robot",
     "check_options",
@@ -98,9 +102,12 @@ MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 1000.0
 
 @dataclass(frozen=True)
 class SkillsConfig:
-    """``skills:`` section: ``modules`` are imported (in order) to register user skills."""
+    """``skills:`` section: ``modules`` are imported (in order) to register user skills;
+    ``paths`` are folders (relative to the config file) put in front of the import path
+    first, so modules next to the config load without PYTHONPATH."""
 
     modules: list[str] = field(default_factory=list)
+    paths: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -154,15 +161,31 @@ class LoadedConfig:
         """The config's ``roots:``, resolved against the config file's folder."""
         return tuple(Path(os.path.realpath(self.path.parent / r)) for r in self.config.roots)
 
+    @property
+    def skill_paths(self) -> tuple[Path, ...]:
+        """The config's ``skills.paths``, resolved against the config file's folder."""
+        return tuple(Path(os.path.realpath(self.path.parent / p)) for p in self.config.skills.paths)
+
 
 def _check_paths(path: Path, cfg: RunConfig, raw: YDict, problems: Problems) -> None:
-    """Each ``roots:`` entry is a folder; a sim ``world`` given as a path lies inside the
+    """Each ``roots:`` entry is a folder; each ``skills.paths`` entry is a folder inside the
+    config's folder tree or a root; a sim ``world`` given as a path lies inside the
     config's folder tree, trees/, sim/worlds/ or a root (it is never opened otherwise)."""
     roots_raw = raw.get("roots")
     roots = [Path(os.path.realpath(path.parent / r)) for r in cfg.roots]
     for i, root in enumerate(roots):
         if not root.is_dir():
             problems.add(roots_raw.item_mark(i), f"roots[{i}]: {cfg.roots[i]!r} is not a folder ({root})")
+    own = (Path(os.path.realpath(path)).parent, *roots)
+    skills_raw = raw.get("skills")
+    for i, entry in enumerate(cfg.skills.paths):
+        folder = Path(os.path.realpath(path.parent / entry))
+        mark = skills_raw["paths"].item_mark(i)
+        if not is_within(folder, own):
+            problems.add(mark, f"skills.paths[{i}]: {entry!r} is outside the folders skill modules may come from "
+                         f"({', '.join(map(str, own))}); name its folder in 'roots:' to allow it")
+        elif not folder.is_dir():
+            problems.add(mark, f"skills.paths[{i}]: {entry!r} is not a folder ({folder})")
     world = cfg.sim.get("world") if cfg.backend == "sim" and isinstance(cfg.sim, dict) else None
     # sim.world reads a value with a '/' or a .yaml/.yml ending as a path (from the
     # current folder), anything else as the name of a shipped world
@@ -201,7 +224,8 @@ def load_config(path: str | Path) -> LoadedConfig:
 
 def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = REGISTRY, *,
                        check: bool = True) -> None:
-    """Import the built-in skill modules, then the config's ``skills.modules``; then,
+    """Import the built-in skill modules, then the config's ``skills.modules`` (with its
+    ``skills.paths`` in front of the import path: :func:`add_import_paths`); then,
     with ``check``, check the config's robot profile against the sections those modules
     declare (:func:`check_profile`).
 
@@ -212,6 +236,7 @@ def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = RE
         registry.load_module(module)
     if loaded is None:
         return
+    add_import_paths(loaded.skill_paths)
     problems = Problems()
     skills_raw = loaded.raw.get("skills")
     modules_raw = skills_raw.get("modules") if isinstance(skills_raw, YDict) else None
@@ -233,6 +258,15 @@ def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = RE
     problems.raise_if_any()
     if check:
         check_profile(loaded)
+
+
+def add_import_paths(folders: Sequence[Path]) -> None:
+    """Put ``folders`` in front of ``sys.path``, in order, as PYTHONPATH would (a folder
+    already there stays where it is); they stay for the rest of the process."""
+    for folder in reversed(folders):
+        if str(folder) not in sys.path:
+            sys.path.insert(0, str(folder))
+    importlib.invalidate_caches()
 
 
 def profile_problems(loaded: LoadedConfig) -> list[Problem]:

@@ -12,7 +12,7 @@ import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from mmexec.config.yamlload import InputError
 from mmexec.executive.campaign.faults import apply_fault_profile, load_fault_profile
@@ -25,6 +25,9 @@ from mmexec.executive.campaign.seeds import trial_seed
 from mmexec.executive.campaign.trial import TrialResult, TrialSpec, parse_trial_log
 from mmexec.executive.runner import SEED_RANGE, ArgMark
 from mmexec.executive.values import MAX_SECONDS
+
+if TYPE_CHECKING:
+    from mmexec.executive.config import LoadedConfig
 
 __all__ = ["Campaign", "CampaignOptions", "run_campaign"]
 
@@ -58,6 +61,20 @@ _IDENTITY_KEYS = ("mission", "mission_sha256", "config", "config_sha256", "seed"
                   "recovery", "randomize", "requests", "params", "request_timeout")
 
 
+def _anchor_folders(cfg: dict[str, Any], loaded: LoadedConfig) -> dict[str, Any]:
+    """``cfg`` with the folders the user's config names relative to itself (``roots:``,
+    ``skills.paths``) written absolute, since ``DIR/config.yaml`` lies elsewhere. Each
+    ``skills.paths`` folder is listed under ``roots:`` too, so the generated config
+    passes the rule that skill folders lie inside the config's folder tree or a root."""
+    roots = [str(r) for r in loaded.roots]
+    paths = [str(p) for p in loaded.skill_paths]
+    if paths:
+        cfg["skills"] = {**cfg.get("skills", {}), "paths": paths}
+    if roots or paths:
+        cfg["roots"] = list(dict.fromkeys(roots + paths))
+    return cfg
+
+
 def _dump_config(cfg: Mapping[str, Any], path: Path, header: str) -> None:
     import yaml  # writing only; all reading goes through mmexec.config.yamlload
 
@@ -83,7 +100,7 @@ class Campaign:
     def prepare(self) -> None:
         """Check every input, write DIR/config.yaml and DIR/campaign.json, build the
         trial specs. Raises InputError on bad input or a DIR holding other settings."""
-        from mmexec.executive.config import load_config
+        from mmexec.executive.config import load_config, load_skill_modules
         from mmexec.executive.runner import Request, Runner, RunOptions
 
         o = self.options
@@ -102,8 +119,10 @@ class Campaign:
             if not (other / "summary.json").is_file():
                 raise InputError.at(ArgMark("--compare", 0, 0), f"{other}: no summary.json (not a campaign directory)")
         loaded = load_config(o.config)
+        quiet_import_pybullet()
+        load_skill_modules(loaded)  # a user module's problem is located in the user's config, not DIR/config.yaml
         profile = load_fault_profile(o.faults)
-        cfg = apply_fault_profile(loaded.raw, profile, randomize=o.randomize)
+        cfg = _anchor_folders(apply_fault_profile(loaded.raw, profile, randomize=o.randomize), loaded)
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
             self.trials_dir.mkdir(exist_ok=True)
@@ -115,7 +134,6 @@ class Campaign:
         staged = self.dir / "config.yaml.new"
         _dump_config(cfg, staged, header)
         plan = o.requests
-        quiet_import_pybullet()
         # Preflight with the runner itself: config (as trials will see it), skill modules,
         # mission, every trial's requests; nothing is connected.
         seeds = [trial_seed(o.seed, i) for i in range(o.trials)]

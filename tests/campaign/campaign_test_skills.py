@@ -1,5 +1,5 @@
 """Test-only skills for the campaign tests (loaded through a test config's
-``skills: modules:``, with this folder on PYTHONPATH).
+``skills: modules:``; its ``skills: paths: [.]`` puts this folder on the import path).
 
 * ``ct_coin``: waits ``item`` x 0.5 s of clock time, then fails (postcondition) when
   ``item`` is odd: each trial's outcome follows from the item its seed drew;

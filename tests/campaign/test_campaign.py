@@ -53,11 +53,10 @@ def coin_items(seed: int, n: int) -> list[int]:
 
 @pytest.fixture(scope="module")
 def skills_on_path() -> Iterator[None]:
-    """Trial processes import ``campaign_test_skills`` from this folder."""
+    """Trial processes import ``campaign_test_skills`` from this folder through
+    coin_mock.yaml's ``skills.paths`` alone: no PYTHONPATH."""
     with pytest.MonkeyPatch.context() as mp:
-        old = os.environ.get("PYTHONPATH", "")
-        mp.setenv("PYTHONPATH", str(HERE) + (os.pathsep + old if old else ""))
-        mp.syspath_prepend(str(HERE))
+        mp.delenv("PYTHONPATH", raising=False)
         yield
 
 
