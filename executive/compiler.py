@@ -301,6 +301,8 @@ class _Builder:
             "sequence": self.b_sequence,
             "fallback": self.b_fallback,
             "parallel": self.b_parallel,
+            "if": self.b_if,
+            "foreach": self.b_foreach,
             "recovery": self.b_recovery,
             "include": self.b_include,
             "retry": self.b_retry,
@@ -327,6 +329,14 @@ class _Builder:
     def b_parallel(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         kids = self.build_children(spec.children, env, path)
         return N.Parallel(self.rt, path, nm, kids, threshold=min(spec.opts["threshold"], len(kids)))
+
+    def b_if(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        kids = self.build_children(spec.children, env, path)
+        return N.IfThenElse(self.rt, path, nm, kids[0], kids[1], kids[2] if spec.opts["has_else"] else None)
+
+    def b_foreach(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
+        o = spec.opts
+        return N.Foreach(self.rt, path, nm, self.build(spec.children[0], env, path), substitute(o["items"], env), o["key"])
 
     def b_recovery(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         kids = self.build_children(spec.children, env, path)

@@ -49,8 +49,8 @@ __all__ = [
     "recovery_key_prefix",
 ]
 
-COMPOSITES = ("sequence", "fallback", "parallel")
-DECORATORS = ("retry", "timeout", "repeat", "invert", "force_success", "force_failure")
+COMPOSITES = ("sequence", "fallback", "parallel", "if")
+DECORATORS = ("retry", "timeout", "repeat", "invert", "force_success", "force_failure", "foreach")
 LEAVES = ("condition", "wait", "skill")
 NODE_TYPES = COMPOSITES + DECORATORS + LEAVES + ("include", "recovery")
 _NODE_TYPE_SET = frozenset(NODE_TYPES)
@@ -60,12 +60,14 @@ OPTIONS: dict[str, tuple[str, ...]] = {
     "sequence": ("reactive",),
     "fallback": ("reactive",),
     "parallel": ("policy",),
+    "if": ("then", "else"),
     "retry": ("attempts",),
     "timeout": ("seconds",),
     "repeat": ("times", "until_failure"),
     "invert": (),
     "force_success": (),
     "force_failure": (),
+    "foreach": ("as", "do"),
     "condition": ("op", "value"),
     "wait": (),
     "skill": ("params", "outputs"),
@@ -203,6 +205,8 @@ class _Parser:
         self.includes: list[NodeSpec] = []
         self.recoveries: list[NodeSpec] = []
         self.typed_reads: list[tuple[str, type, Mark, str, Any]] = []
+        #: the keys the enclosing foreach nodes bind, with where (innermost last)
+        self.bound: list[tuple[str, Mark]] = []
         self.formatted_reads: list[tuple[str, str, Mark, str]] = []
         self.handlers: dict[str, Callable[[NodeSpec, YDict, Any, Mark, int], None]] = {
             k: getattr(self, "n_" + k) for k in NODE_TYPES
@@ -512,6 +516,82 @@ class _Parser:
             self.err(raw.value_mark("until_failure"), "repeat: 'until_failure: false' needs 'times: N' instead")
         spec.opts["times"] = times
 
+    def n_if(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        parts = [self.child(arg, am, depth, "if")]
+        if "then" not in raw:
+            self.err(spec.mark, "if: missing required key 'then' (the node run when the condition succeeds)")
+        for k in ("then", "else"):
+            if k in raw:
+                parts.append(self.child(raw[k], raw.value_mark(k), depth, f"if.{k}"))
+        spec.opts["has_else"] = "else" in raw
+        spec.children = [c for c in parts if c is not None]
+
+    def n_foreach(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
+        spec.opts["items"] = items = self.list_value(arg, am)
+        key = raw.get("as")
+        if "as" not in raw:
+            self.err(spec.mark, "foreach: missing required key 'as' (the blackboard key each element is written to)")
+        else:
+            key = self.bound_key(key, raw.value_mark("as"), items)
+        spec.opts["key"] = key
+        if "do" not in raw:
+            self.err(spec.mark, "foreach: missing required key 'do' (the node run once per element)")
+            return
+        if key is not None:
+            self.bound.append((key, raw.value_mark("as")))
+        try:
+            c = self.child(raw["do"], raw.value_mark("do"), depth, "foreach.do")
+        finally:
+            if key is not None:
+                self.bound.pop()
+        if c is not None:
+            spec.children.append(c)
+
+    def list_value(self, arg: Any, am: Mark) -> Expr | None:
+        """A foreach's list: a literal list, or a reference to a list (a parameter, a
+        request field, a blackboard key); None (a problem recorded) otherwise."""
+        if not isinstance(arg, (YList, str)) or (isinstance(arg, str) and "{" not in arg):
+            got = _short(arg) if isinstance(arg, str) else _tname(arg)
+            self.err(am, f"foreach: expected a list or a reference to one like '{{request.items}}', got {got}")
+            return None
+        e = self.value(arg, am, "foreach")
+        if e is None:
+            return None
+        t = self.static_type(e)
+        if isinstance(e, Ref):
+            # checked by the compiler once every write is known; else by the node at run time
+            self.typed_reads.append((e.key, list, am, "foreach expects a list", arg))
+        elif isinstance(e, (Template, Format)) or not type_compatible(list, t):
+            self.err(am, f"foreach: expected a list, but {arg!r} is {t.__name__ if t else '?'}")
+            return None
+        return e
+
+    def bound_key(self, key: Any, mark: Mark, items: Expr | None) -> str | None:
+        """Check a foreach's ``as`` key and record it as written (with the elements' type
+        when a literal list has one); None (a problem recorded) when it is unusable."""
+        if not isinstance(key, str) or not KEY_RE.fullmatch(key):
+            self.err(mark, f"foreach.as: expected a blackboard key name, got {key!r}")
+            return None
+        if key in self.params:
+            self.err(mark, f"foreach.as: {key!r} is a parameter of this file: '{{{key}}}' would read the parameter, not the element")
+            return None
+        if key.startswith("request.") or key in FAILURE_KEYS:
+            self.err(mark, f"foreach.as: key {key!r} is reserved (written by the executive)")
+            return None
+        outer = next((m for k, m in self.bound if k == key), None)
+        if outer is not None:
+            self.err(mark, f"foreach.as: {key!r} is already bound by the enclosing foreach at {outer}; use another name")
+            return None
+        kinds = {type(v) for v in items.value} if isinstance(items, Const) else set()
+        self.wrote(key, kinds.pop() if len(kinds) == 1 else None)
+        return key
+
+    def wrote(self, key: str, tp: type | None) -> None:
+        """Record that the tree writes ``key`` with values of type ``tp`` (None: unknown,
+        also when two writers disagree)."""
+        prev = self.writes.get(key, tp)
+        self.writes[key] = tp if prev == tp else None
+
     def n_invert(self, spec: NodeSpec, raw: YDict, arg: Any, am: Mark, depth: int) -> None:
         self._deco(spec, arg, am, depth)
 
@@ -614,9 +694,7 @@ class _Parser:
                         did_you_mean(oname, names) or (f" (expected one of: {', '.join(names)})" if names else " (it declares no outputs)")))
                     continue
                 outs[oname] = key
-                tp = out_decl.type if out_decl is not None else None
-                prev = self.writes.get(key, tp)
-                self.writes[key] = tp if prev == tp else None
+                self.wrote(key, out_decl.type if out_decl is not None else None)
         spec.opts["outputs"] = outs
 
     def check_param(self, sk: SkillSpec, decl: Param, e: Expr, raw: Any, mark: Mark) -> None:

@@ -6,10 +6,10 @@ Split as py_trees is (one concept per module):
   halt contract, the tree's :class:`Runtime` (blackboard, context, listeners) and
   :class:`NodeError`;
 * :mod:`~mmexec.executive.nodes.composites`: :class:`Sequence`, :class:`Fallback`,
-  :class:`Parallel`;
+  :class:`Parallel`, :class:`IfThenElse`;
 * :mod:`~mmexec.executive.nodes.decorators`: :class:`Invert`, :class:`ForceSuccess`,
-  :class:`ForceFailure`, :class:`Retry`, :class:`Repeat`, :class:`Timeout` and
-  :class:`Subtree` (an include);
+  :class:`ForceFailure`, :class:`Retry`, :class:`Repeat`, :class:`Foreach`,
+  :class:`Timeout` and :class:`Subtree` (an include);
 * :mod:`~mmexec.executive.nodes.leaves`: :class:`Wait`, :class:`Condition`,
   :class:`SkillLeaf`;
 * :mod:`~mmexec.executive.nodes.recovery`: :class:`Recovery`.
@@ -20,10 +20,11 @@ Every name is importable from this package (``from mmexec.executive.nodes import
 from __future__ import annotations
 
 from mmexec.executive.nodes.behaviour import MissionNode, NodeError, Runtime, running_tip
-from mmexec.executive.nodes.composites import Fallback, Parallel, Sequence
+from mmexec.executive.nodes.composites import Fallback, IfThenElse, Parallel, Sequence
 from mmexec.executive.nodes.decorators import (
     ForceFailure,
     ForceSuccess,
+    Foreach,
     Invert,
     Repeat,
     Retry,
@@ -38,6 +39,8 @@ __all__ = [
     "Fallback",
     "ForceFailure",
     "ForceSuccess",
+    "Foreach",
+    "IfThenElse",
     "Invert",
     "MissionNode",
     "NodeError",

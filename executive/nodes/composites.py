@@ -1,4 +1,4 @@
-"""Composites (py_trees' ``composites.py``): sequence, fallback, parallel.
+"""Composites (py_trees' ``composites.py``): sequence, fallback, parallel, if/then/else.
 
 Each decides which of its children run, following the halt contract of
 :mod:`mmexec.executive.nodes.behaviour`.
@@ -20,7 +20,7 @@ from mmexec.executive.nodes.behaviour import (
     Runtime,
 )
 
-__all__ = ["Fallback", "Parallel", "Sequence"]
+__all__ = ["Fallback", "IfThenElse", "Parallel", "Sequence"]
 
 
 class _Chain(MissionNode):
@@ -124,3 +124,33 @@ class Parallel(MissionNode, py_trees.composites.Parallel):
         if fail > len(self.children) - self.threshold:
             return self._preempt(self.children, FAILURE)
         return RUNNING
+
+
+class IfThenElse(MissionNode, py_trees.composites.Composite):
+    """BehaviorTree.CPP's IfThenElse: a condition picks a branch.
+
+    Children: ``[condition, then]`` or ``[condition, then, else]``. The condition (any
+    node) is ticked until it finishes; SUCCESS picks ``then``, FAILURE picks ``else``
+    (without one the node fails), and the picked branch is ticked in the same tick. Its
+    status is the node's; the condition is not ticked again while the branch runs.
+    """
+
+    def __init__(self, rt: Runtime, path: str, name: str, condition: Any, then: Any, orelse: Any | None) -> None:
+        self._mn_init(rt, path, name, [condition, then] + ([orelse] if orelse is not None else []))
+        self.current_child = None
+        self.condition, self.then, self.orelse = condition, then, orelse
+        #: the branch this activation picked (None: the condition has not finished)
+        self.branch: Any | None = None
+
+    def _start(self) -> None:
+        self.branch = None
+
+    def _update(self) -> Status:
+        if self.branch is None:
+            st = self.condition.step()
+            if st is RUNNING:
+                return RUNNING
+            if st is FAILURE and self.orelse is None:
+                return FAILURE
+            self.branch = self.then if st is SUCCESS else self.orelse
+        return self.branch.step()  # type: ignore[no-any-return]

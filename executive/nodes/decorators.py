@@ -1,5 +1,6 @@
-"""Decorators (py_trees' ``decorators.py``): one child whose status they map, repeat
-or bound in time, and :class:`Subtree`, the node an ``include`` becomes."""
+"""Decorators (py_trees' ``decorators.py``): one child whose status they map, repeat,
+run once per list element or bound in time, and :class:`Subtree`, the node an
+``include`` becomes."""
 
 from __future__ import annotations
 
@@ -16,10 +17,10 @@ from mmexec.executive.nodes.behaviour import (
     Runtime,
     clock_seconds,
 )
-from mmexec.executive.values import Expr
+from mmexec.executive.values import EvalError, Expr
 from mmexec.skills.base import FailureKind
 
-__all__ = ["ForceFailure", "ForceSuccess", "Invert", "Repeat", "Retry", "Subtree", "Timeout"]
+__all__ = ["ForceFailure", "ForceSuccess", "Foreach", "Invert", "Repeat", "Retry", "Subtree", "Timeout"]
 
 
 class _Decorator(MissionNode, py_trees.decorators.Decorator):
@@ -98,6 +99,52 @@ class Repeat(_Decorator):
             if self.times is not None and self.count >= self.times:
                 return SUCCESS
             return RUNNING
+        return st
+
+
+class Foreach(_Decorator):
+    """Runs the child once per element of a list, one run per tick at most (as BT.CPP's
+    LoopNode): before each run the element is written to blackboard key ``key``, where
+    the child reads it as ``{key}``. SUCCESS after the last element's run succeeded (at
+    once for an empty list), FAILURE when a run fails. The list is read when the node
+    starts (a change on the blackboard during the loop is not seen); a missing key or a
+    value that is not a list fails it with kind precondition. Event: ``foreach_item``
+    (``index`` from 0, ``count``) as each run starts."""
+
+    def __init__(self, rt: Runtime, path: str, name: str, child: Any, items: Expr, key: str) -> None:
+        super().__init__(rt, path, name, child)
+        self.items = items
+        self.key = key
+        self.index = 0
+        self._list: list[Any] = []
+
+    def _start(self) -> None:
+        self.index = 0
+        self._list = []
+        self._bad = None
+        try:
+            items = self.items.eval(self.rt.bb)
+        except EvalError as e:
+            self._bad = f"foreach: {e.reason}"
+            return
+        if not isinstance(items, (list, tuple)):
+            self._bad = f"foreach: expected a list, got {type(items).__name__} {items!r:.60}"
+            return
+        self._list = list(items)
+
+    def _update(self) -> Status:
+        if self._bad is not None:
+            return self._unmet()
+        items = self._list
+        if self.index >= len(items):
+            return SUCCESS
+        if self.child.status is not RUNNING:
+            self.rt.bb[self.key] = items[self.index]
+            self.rt.emit("foreach_item", self.path, index=self.index, count=len(items))
+        st = self.child.step()
+        if st is SUCCESS:
+            self.index += 1
+            return SUCCESS if self.index >= len(items) else RUNNING
         return st
 
 

@@ -34,7 +34,8 @@ TOKENS = [b"sequence:", b"fallback:", b"parallel:", b"retry:", b"timeout:", b"re
           b"- ", b"  ", b"\n", b"{", b"}", b"[", b"]", b"&a ", b"*a", b"\"{x}\"", b"{request.item}", b"!!str",
           b"!!python/object:x", b"\xff", b"\x00", b"---\n", b"include: ../malformed/unknown_skill.yaml",
           b"include: m.yaml", b"max_recoveries: -1", b"policy: 7", b": ", b"1e999", b"~", b"<<: *a",
-          b"\"{x:.2f}\"", b"{request.item:03d}", b":.2q", b":99999999", b"{x:}"]
+          b"\"{x:.2f}\"", b"{request.item:03d}", b":.2q", b":99999999", b"{x:}",
+          b"foreach: ", b"as: x", b"do: ", b"if: ", b"then: ", b"else: ", b"foreach: \"{request.item}\""]
 REG = corpus_registry()
 TMP = Path(tempfile.mkdtemp(prefix="mmexec-fuzz-"))
 
@@ -87,7 +88,8 @@ def test_mutated_missions_only_raise_input_error(data):
         ["sequence", "skill", "succeed", "tree", "{x}", "{request.item}", "pick", "exists", "=="]),
     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(
         st.sampled_from(["tree", "sequence", "fallback", "skill", "params", "name", "recovery", "action",
-                         "retry", "attempts", "condition", "op", "value", "wait", "include", "requests", "item"]),
+                         "retry", "attempts", "condition", "op", "value", "wait", "include", "requests", "item",
+                         "foreach", "as", "do", "if", "then", "else"]),
         inner, max_size=4),
     max_leaves=20))
 def test_random_structures_only_raise_input_error(value):
