@@ -181,10 +181,16 @@ def test_unplugged_gripper_stops_and_reconnect_clears_the_watchdog(no_leaks: Non
         fake.unplug()
         wait(goal, 3.0)
         assert goal.state is GoalState.FAILED and goal.reason.startswith("link lost")
-        # nothing reaches the servos any more: the gripper stops by itself
+        # nothing reaches the servos any more: the gripper stops by itself, within the
+        # watchdog period of the last packet it got (at most that long of travel at PWM 150)
         assert until(lambda: fake.register(GRIPPER, "bus_watchdog") == -1), "watchdog never fired"
         assert fake.register(GRIPPER, "goal_pwm") == 0
-        assert fake.register(GRIPPER, "present_position") < open_stop()
+        servo = fake.servo(GRIPPER)
+        [(_when, fired_at)] = servo.watchdog_fires
+        speed = 150 / servo.get("pwm_limit") * servo.get("velocity_limit") * PULSES_S_PER_UNIT
+        travel = fired_at - servo.position_at_last_instruction
+        assert 0 < travel <= speed * WATCHDOG_MS / 1000 + 1e-6
+        assert fake.register(GRIPPER, "present_position") == round(fired_at) < open_stop()
     finally:
         dev.close()
         fake.stop()
