@@ -272,6 +272,10 @@ def test_show_prints_tree_and_writes_dot(run_cli, repo_root: Path, tmp_path: Pat
     res = run_cli("show", repo_root / "trees" / "demo_mock.yaml", "--dot", dot)
     assert res.rc == 0, res.err
     assert res.out.splitlines()[0].endswith("demo_fetch") and "go_to_shelf" in res.out and "pick_item" in res.out
-    assert "digraph" in dot.read_text() and f"wrote {dot}" in res.out
+    assert "    (R) pick_item  recovery, at most 2 recoveries\n        action: {-} sequence\n" in res.out
+    assert "        --> grasp  close_gripper(expect=object)\n" in res.out and "    give_up: {-} sequence#3\n" in res.out
+    text = dot.read_text()
+    assert "digraph" in text and f"wrote {dot}" in res.out
+    assert '"demo_fetch/pick_item" -> "demo_fetch/pick_item/sequence#3" [label="give_up"];' in text
     res = run_cli("show", repo_root / "trees" / "demo_mock.yaml", "--dot", tmp_path / "no" / "dir" / "x.dot")
     assert_input_error(res, "x.dot:1:1: cannot write")
