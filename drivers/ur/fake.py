@@ -35,13 +35,11 @@ import numpy as np
 
 from mmexec.drivers.interfaces import Clock
 from mmexec.drivers.ur import model as urmodel
+from mmexec.drivers.ur import states
 
 __all__ = ["FakeRTDEControl", "FakeRTDEReceive", "FakeURController"]
 
 log = logging.getLogger(__name__)
-
-_STATUS_RUNNING = 0b11  # power on, program running
-_STATUS_STOPPED = 0b01
 
 
 @dataclass
@@ -161,6 +159,26 @@ class FakeURController:
             self._halt()
             self.runtime_state = 1
 
+    def set_state(self, *, robot_mode: int | None = None, safety_mode: int | None = None,
+                  runtime_state: int | None = None) -> None:
+        """Any controller state by the vendor's numbers (hardware-protocols.md 4.2), e.g.
+        power off ``robot_mode=3``, brakes engaged ``robot_mode=5``, safeguard stop
+        ``safety_mode=5``; the safety status bits follow. A state in which the arm cannot
+        move halts it. ValueError for a number the vendor does not define."""
+        with self._lock:
+            rm = self.robot_mode if robot_mode is None else int(robot_mode)
+            sm = self.safety_mode if safety_mode is None else int(safety_mode)
+            rt = self.runtime_state if runtime_state is None else int(runtime_state)
+            bits = states.safety_status_bits(sm)
+            states.robot_status_bits(rm, rt)  # validates the robot mode and runtime state
+            if states.running_fault(rm, sm, bits, rt):
+                self._halt()
+            self.robot_mode, self.safety_mode, self.runtime_state, self.safety_status_bits = rm, sm, rt, bits
+
+    def power_off(self) -> None:
+        """Robot mode 3 (power off): the arm halts, the power-on status bit clears."""
+        self.set_state(robot_mode=3)
+
     def clear_faults(self) -> None:
         """Back to normal: safety mode 1, robot mode 7, runtime state 2."""
         with self._lock:
@@ -262,7 +280,7 @@ class FakeURController:
             "safety_mode": self.safety_mode,
             "safety_status_bits": self.safety_status_bits,
             "runtime_state": self.runtime_state,
-            "robot_status_bits": _STATUS_RUNNING if self.runtime_state == 2 else _STATUS_STOPPED,
+            "robot_status_bits": states.robot_status_bits(self.robot_mode, self.runtime_state),
         }
 
     def _block(self, seconds: float) -> None:
@@ -525,7 +543,7 @@ class FakeRTDEControl(_FakeInterface):
             return self._ctrl._mode == "idle" and not np.any(self._ctrl._qd)
 
     def getRobotStatus(self) -> int:
-        return _STATUS_RUNNING if self._ctrl.runtime_state == 2 else _STATUS_STOPPED
+        return states.robot_status_bits(self._ctrl.robot_mode, self._ctrl.runtime_state)
 
     def getAsyncOperationProgress(self) -> int:
         """Index of the path segment being executed, or -1 when no async move runs."""

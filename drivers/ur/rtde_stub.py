@@ -6,6 +6,9 @@ injected names), ``I`` (recipe ids 1, 2, 3... per connection in setup order, as 
 interface assumes), ``S`` and ``P``, and after ``S`` streams ``U`` packages at the recipe
 frequency: joint state, robot mode 7 (running), safety mode 1 (normal), runtime state 2
 (playing), robot status bits 0b11 (power on, program running), safety status bit 0.
+Like the controller, it stamps every package with the time of its sample (``timestamp``
+advances by exactly one period per package) and, when it fell behind (a loaded machine),
+sends the samples it owes instead of skipping them, up to five seconds' worth.
 
 Why a separate process: ur_rtde's constructors block while holding the Python GIL, so a
 server thread in the same interpreter deadlocks them (docs/protocols.md 4.3).
@@ -23,10 +26,17 @@ The control channel is the process's stdin / stdout, one JSON object per line. T
 first prints ``{"event": "listening", "host": H, "port": P}``, then answers each
 command line with ``{"ok": true, ...}`` or ``{"ok": false, "error": "..."}``. Commands
 (field ``cmd``): ``protective_stop``, ``emergency_stop``, ``program_stopped``,
-``clear_faults``, ``drop`` (close every client connection), ``refuse`` (``on``: stop /
-resume listening, so connects are refused), ``freeze`` (``on``: keep connections but
-stop streaming, so data goes stale), ``not_found`` (``names``: variables answered
-``NOT_FOUND``), ``set_joints`` (``q`` [rad], optional ``qd`` [rad/s]), ``stats``, ``quit``.
+``clear_faults``, ``state`` (any of ``robot_mode``, ``safety_mode``, ``runtime_state``
+by the vendor's numbers; the status bit fields follow, :mod:`mmexec.drivers.ur.states`),
+``drop`` (close every client connection), ``refuse`` (``on``: stop / resume listening,
+so connects are refused), ``freeze`` (``on``: keep connections but stop streaming, so
+data goes stale), ``link`` (``skip_every`` N: every N-th package is never sent, i.e.
+lost; ``hold`` S: packages are held back and sent in bursts once the oldest is S
+seconds old, i.e. late; 0 turns each off), ``silence`` (``after`` N: the next N new
+connections are served, later ones accepted but never answered; null: off),
+``garbage`` (``on``: every request is answered with bytes that are not RTDE),
+``not_found`` (``names``: variables answered ``NOT_FOUND``), ``set_joints`` (``q``
+[rad], optional ``qd`` [rad/s]), ``stats``, ``quit``.
 :class:`RTDEStub` drives all of this from the parent process.
 """
 
@@ -46,6 +56,7 @@ from dataclasses import dataclass, field
 from typing import IO, Any, Self
 
 from mmexec.drivers.ur import rtde_codec as codec
+from mmexec.drivers.ur import states
 from mmexec.drivers.ur.rtde_codec import PackageType
 
 __all__ = ["RTDEStub", "StubError", "StubServer", "main"]
@@ -54,10 +65,17 @@ log = logging.getLogger(__name__)
 
 RTDE_PORT = 30004
 _MAX_FREQUENCY = 500.0  # Hz, e-series controller rate
+_MAX_BACKLOG = 5.0  # s of owed samples the stub still sends after falling behind
+#: what a request is answered with while ``garbage`` is on (a text service's greeting)
+GARBAGE = b"Connected: this is not an RTDE server\n"
 
-# robot_status_bits: bit 0 power on, bit 1 program running
-_STATUS_RUNNING = 0b11
-_STATUS_STOPPED = 0b01
+#: the named fault commands as vendor state numbers (hardware-protocols.md 4.2, 4.6)
+_NAMED_STATES: dict[str, dict[str, int]] = {
+    "protective_stop": {"safety_mode": 3},
+    "emergency_stop": {"safety_mode": 7, "robot_mode": 3},  # robot e-stop cuts arm power
+    "program_stopped": {"runtime_state": 1},
+    "clear_faults": {"safety_mode": 1, "robot_mode": 7, "runtime_state": 2},
+}
 
 
 class StubError(RuntimeError):
@@ -81,6 +99,9 @@ class _Client:
     next_send: float = 0.0
     inputs: dict[int, list[str]] = field(default_factory=dict)
     input_names: dict[int, list[str]] = field(default_factory=dict)
+    silent: bool = False  # accepted but never answered
+    samples: int = 0  # samples taken since S (sent, skipped or held)
+    held: list[tuple[float, bytes]] = field(default_factory=list)  # (sample time, package)
 
 
 class StubServer:
@@ -109,9 +130,13 @@ class StubServer:
         self.safety_mode = 1
         self.safety_status_bits = 1
         self.runtime_state = 2
-        self.robot_status_bits = _STATUS_RUNNING
+        self.robot_status_bits = states.robot_status_bits(self.robot_mode, self.runtime_state)
         self._accepted = 0
         self._packages_sent = 0
+        self._skip_every = 0
+        self._hold = 0.0
+        self._serve_before_silence: int | None = None
+        self._garbage = False
         self._inputs_seen: list[dict[str, Any]] = []
         self._last_output_names: list[str] = []
         self._last_frequency = 0.0
@@ -165,7 +190,8 @@ class StubServer:
         return 0
 
     def _next_deadline(self) -> float:
-        times = [c.next_send for c in self._clients.values() if c.streaming and not self._frozen]
+        times = [c.next_send for c in self._clients.values() if c.streaming and not c.silent and not self._frozen]
+        times += [c.held[0][0] + self._hold for c in self._clients.values() if c.held]
         return min(times) if times else time.monotonic() + 0.1
 
     # -- control channel
@@ -188,18 +214,23 @@ class StubServer:
 
     def _apply(self, cmd: dict[str, Any]) -> dict[str, Any]:
         name = cmd["cmd"]
-        if name == "protective_stop":
-            self.safety_mode, self.safety_status_bits = 3, 1 << 2
-            self.qd = [0.0] * 6
-        elif name == "emergency_stop":
-            self.safety_mode, self.safety_status_bits = 7, (1 << 6) | (1 << 7)
-            self.robot_mode = 3
-            self.qd = [0.0] * 6
-        elif name == "program_stopped":
-            self.runtime_state, self.robot_status_bits = 1, _STATUS_STOPPED
-        elif name == "clear_faults":
-            self.safety_mode, self.safety_status_bits, self.robot_mode = 1, 1, 7
-            self.runtime_state, self.robot_status_bits = 2, _STATUS_RUNNING
+        named = _NAMED_STATES.get(name)
+        if named is not None:
+            self._set_state(named)
+        elif name == "state":
+            self._set_state(cmd)
+        elif name == "link":
+            skip, hold = int(cmd.get("skip_every", 0)), float(cmd.get("hold", 0.0))
+            if skip < 0 or skip == 1 or not 0.0 <= hold <= 60.0:
+                raise ValueError("skip_every must be 0 (off) or >= 2, hold in [0, 60] s")
+            self._skip_every, self._hold = skip, hold
+        elif name == "silence":
+            after = cmd["after"]
+            if after is not None and int(after) < 0:
+                raise ValueError("after must be >= 0 or null")
+            self._serve_before_silence = None if after is None else int(after)
+        elif name == "garbage":
+            self._garbage = bool(cmd["on"])
         elif name == "drop":
             n = len(self._clients)
             for c in list(self._clients.values()):
@@ -249,6 +280,11 @@ class StubServer:
         sock.setblocking(False)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         c = _Client(sock, f"{addr[0]}:{addr[1]}")
+        if self._serve_before_silence is not None:
+            if self._serve_before_silence == 0:
+                c.silent = True
+            else:
+                self._serve_before_silence -= 1
         self._clients[sock.fileno()] = c
         self._sel.register(sock, selectors.EVENT_READ, c)
         self._accepted += 1
@@ -295,6 +331,11 @@ class StubServer:
             self._close(c)
 
     def _handle(self, c: _Client, p: codec.Package) -> None:
+        if c.silent:
+            return
+        if self._garbage and p.type != PackageType.DATA_PACKAGE:
+            self._send(c, GARBAGE)
+            return
         t = p.type
         if t == PackageType.REQUEST_PROTOCOL_VERSION:
             version = codec.decode_request_protocol_version(p.payload)
@@ -326,6 +367,7 @@ class StubServer:
             ok = c.output_id != 0 or bool(c.inputs)
             c.streaming = c.output_id != 0
             c.next_send = time.monotonic()
+            c.samples = 0
             self._send(c, codec.encode_accepted(t, ok))
         elif t == PackageType.CONTROL_PACKAGE_PAUSE:
             c.streaming = False
@@ -338,13 +380,24 @@ class StubServer:
         else:
             log.info("client %s sent unhandled package type %d", c.addr, t)
 
+    def _set_state(self, cmd: dict[str, Any]) -> None:
+        """``state`` command: vendor robot mode / safety mode / runtime state numbers."""
+        robot_mode = int(cmd.get("robot_mode", self.robot_mode))
+        safety_mode = int(cmd.get("safety_mode", self.safety_mode))
+        runtime_state = int(cmd.get("runtime_state", self.runtime_state))
+        bits = states.safety_status_bits(safety_mode)  # ValueError for unknown numbers
+        status = states.robot_status_bits(robot_mode, runtime_state)
+        self.robot_mode, self.safety_mode, self.runtime_state = robot_mode, safety_mode, runtime_state
+        self.safety_status_bits, self.robot_status_bits = bits, status
+        if states.safety_fault(safety_mode, bits) or robot_mode != states.ROBOT_MODE_RUNNING:
+            self.qd = [0.0] * 6
+
     def _type(self, name: str) -> str:
         return codec.NOT_FOUND if name in self._not_found else codec.variable_type(name)
 
-    def _value(self, name: str, rtde_type: str) -> Any:
-        now = time.monotonic() - self._t0
+    def _value(self, name: str, rtde_type: str, stamp: float) -> Any:
         fixed: dict[str, Any] = {
-            "timestamp": now,
+            "timestamp": stamp,
             "actual_q": self.q,
             "target_q": self.q,
             "actual_qd": self.qd,
@@ -377,14 +430,29 @@ class StubServer:
             return
         now = time.monotonic()
         for c in list(self._clients.values()):
-            if not c.streaming or now < c.next_send:
+            if not c.streaming or c.silent:
                 continue
-            values = [self._value(n, t) for n, t in zip(c.output_names, c.output_types)]
-            self._send(c, codec.encode_data(c.output_id, c.output_types, values))
-            self._packages_sent += 1
-            c.next_send += c.period
-            if c.next_send < now - c.period:
-                c.next_send = now + c.period  # fell behind: do not burst
+            if now - c.next_send > _MAX_BACKLOG:  # fell too far behind: those samples are lost
+                c.next_send = now
+            while now >= c.next_send and c.sock.fileno() >= 0:
+                stamp = c.next_send - self._t0  # the sample's time, as the controller stamps it
+                c.next_send += c.period
+                c.samples += 1
+                if self._skip_every and c.samples % self._skip_every == 0:
+                    continue  # injected loss
+                values = [self._value(n, t, stamp) for n, t in zip(c.output_names, c.output_types)]
+                frame = codec.encode_data(c.output_id, c.output_types, values)
+                if self._hold > 0.0:
+                    c.held.append((stamp + self._t0, frame))
+                else:
+                    self._send_frames(c, [frame])
+            if c.held and now - c.held[0][0] >= self._hold:
+                frames, c.held = [f for _, f in c.held], []
+                self._send_frames(c, frames)
+
+    def _send_frames(self, c: _Client, frames: list[bytes]) -> None:
+        self._send(c, b"".join(frames))
+        self._packages_sent += len(frames)
 
 
 def _jsonable(v: Any) -> Any:
@@ -504,6 +572,28 @@ class RTDEStub:
 
     def clear_faults(self) -> None:
         self.command("clear_faults")
+
+    def set_state(self, *, robot_mode: int | None = None, safety_mode: int | None = None,
+                  runtime_state: int | None = None) -> None:
+        """Robot mode, safety mode and/or runtime state by the vendor's numbers
+        (hardware-protocols.md 4.2); both status bit fields follow. E.g. power off:
+        ``robot_mode=3``; brakes engaged: ``robot_mode=5``; safeguard stop: ``safety_mode=5``."""
+        given = {"robot_mode": robot_mode, "safety_mode": safety_mode, "runtime_state": runtime_state}
+        self.command("state", **{k: v for k, v in given.items() if v is not None})
+
+    def set_link(self, *, skip_every: int = 0, hold: float = 0.0) -> None:
+        """Link faults: never send every ``skip_every``-th package (lost); hold packages
+        back until the oldest is ``hold`` s old, then send them at once (late). 0 = off."""
+        self.command("link", skip_every=skip_every, hold=hold)
+
+    def silence(self, after: int | None = 0) -> None:
+        """Serve the next ``after`` new connections, then accept connections and never
+        answer them (None: serve every connection again)."""
+        self.command("silence", after=after)
+
+    def garbage(self, on: bool = True) -> None:
+        """Answer every request with bytes that are not RTDE (:data:`GARBAGE`)."""
+        self.command("garbage", on=on)
 
     def drop_connections(self) -> int:
         """Close every client connection (the stub keeps listening); returns how many."""

@@ -105,8 +105,11 @@ def test_cancel_decelerates_then_cancelled(rig: tuple[URArm, FakeURController, M
         (FakeURController.stop_program, "program stopped (runtime state 1: stopped)"),
         (FakeURController.drop_connections, "connection lost: RTDE link to fake-ur closed"),
         (lambda c: c.freeze(True), "connection lost: no new RTDE data from fake-ur"),
+        (FakeURController.power_off, "robot not running (robot mode 3: power off)"),
+        (lambda c: c.set_state(safety_mode=5), "safeguard stop (safeguard stop)"),
+        (lambda c: c.set_state(safety_mode=9), "safety fault (safety mode 9: fault)"),
     ],
-    ids=["protective", "estop", "program", "disconnect", "stale"],
+    ids=["protective", "estop", "program", "disconnect", "stale", "power_off", "safeguard", "fault"],
 )
 def test_fault_mid_motion_fails_goal_with_reason(
     rig: tuple[URArm, FakeURController, ManualClock], inject, reason: str  # type: ignore[no-untyped-def]
@@ -235,13 +238,13 @@ def test_refused_connection_is_one_line() -> None:
 def test_connect_deadline_and_late_interface_is_disconnected() -> None:
     baseline = threading.active_count()
     clock = ManualClock()
-    ctrl = FakeURController(clock, connect_delay=2.0)
+    ctrl = FakeURController(clock, connect_delay=60.0)  # released below
     arm = URArm(URArmConfig(host="slow", connect_timeout=0.2), clock=clock,
                 control_factory=ctrl.control_factory, receive_factory=ctrl.receive_factory)
     t0 = time.monotonic()
     with pytest.raises(URConnectionError, match="no answer within 0.2 s|did not return within 0.20 s"):
         arm.open()
-    assert time.monotonic() - t0 < 0.6
+    assert time.monotonic() - t0 < 30.0  # the deadline fired (a generous bound: not a timing test)
     ctrl.release_blocked_calls()
     arm.close()
     assert ctrl.connections == ctrl.disconnects  # the late interface was not kept
@@ -285,6 +288,22 @@ def test_tcp_pose_in_ros_base_link(rig: tuple[URArm, FakeURController, ManualClo
     assert T_bl[:3, 3] == pytest.approx([0.8172, 0.2329, 0.0628], abs=1e-3)  # docs/robots.md 2.1
     # tool0 z axis along +y of base_link at the zero pose (docs/robots.md 2.3)
     assert T_bl[:3, 2] == pytest.approx([0.0, 1.0, 0.0], abs=1e-3)
+
+
+def test_fake_states_follow_the_vendor_numbers() -> None:
+    ctrl = FakeURController(ManualClock())
+    r = ctrl.receive_factory("fake")
+    ctrl.power_off()
+    assert (r.getRobotMode(), r.getRobotStatus() & 1) == (3, 0)  # power-on bit cleared
+    ctrl.set_state(robot_mode=7, safety_mode=6)
+    assert (r.getSafetyMode(), r.getSafetyStatusBits()) == (6, (1 << 5) | (1 << 7))
+    assert r.isEmergencyStopped() and not r.isProtectiveStopped()
+    ctrl.set_state(safety_mode=1, runtime_state=1)
+    assert (r.getSafetyStatusBits(), r.getRobotStatus()) == (1, 0b01)  # powered, no program
+    for bad in ({"robot_mode": 9}, {"safety_mode": 0}, {"runtime_state": 6}):
+        with pytest.raises(ValueError, match="unknown"):
+            ctrl.set_state(**bad)
+    assert (r.getRobotMode(), r.getSafetyMode(), r.getRuntimeState()) == (7, 1, 1)  # unchanged
 
 
 def test_fake_servo_watchdog_and_ik() -> None:
