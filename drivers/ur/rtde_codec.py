@@ -93,6 +93,9 @@ class PackageType(enum.IntEnum):
     CONTROL_PACKAGE_PAUSE = ord("P")
 
 
+_PACKAGE_TYPES = frozenset(int(t) for t in PackageType)
+
+
 class Package(NamedTuple):
     """One framed package: its type byte and its payload (header stripped)."""
 
@@ -151,12 +154,15 @@ def encode_package(ptype: int, payload: bytes = b"") -> bytes:
     return HEADER.pack(size, int(ptype)) + bytes(payload)
 
 
-def split_packages(buffer: bytes) -> tuple[list[Package], bytes]:
+def split_packages(buffer: bytes, *, strict: bool = False) -> tuple[list[Package], bytes]:
     """Cut every complete package off the front of ``buffer``.
 
     Returns the packages and the unconsumed tail (an incomplete package, to be kept
     and completed by the next read). A size field below 3 cannot be resynchronised
-    from (RTDE has no start marker) and raises :class:`RTDECodecError`.
+    from (RTDE has no start marker) and raises :class:`RTDECodecError`. With
+    ``strict``, so does a type byte that is no :class:`PackageType`, already in the
+    header of an incomplete package: a peer that is not an RTDE server is found out by
+    its first three bytes instead of a wait for a 'package' of up to 64 kB.
     """
     out: list[Package] = []
     pos = 0
@@ -165,6 +171,8 @@ def split_packages(buffer: bytes) -> tuple[list[Package], bytes]:
         size, ptype = HEADER.unpack_from(buffer, pos)
         if size < HEADER.size:
             raise RTDECodecError(f"package size field {size} < 3 at offset {pos}")
+        if strict and ptype not in _PACKAGE_TYPES:
+            raise RTDECodecError(f"unknown package type {ptype} (0x{ptype:02x}) at offset {pos}")
         if n - pos < size:
             break
         out.append(Package(ptype, bytes(buffer[pos + HEADER.size : pos + size])))

@@ -126,6 +126,15 @@ def test_split_packages_keeps_partial_tail_and_rejects_bad_size() -> None:
         c.split_packages(b"\x00\x02V")
 
 
+def test_strict_split_rejects_unknown_type_in_the_first_header() -> None:
+    # a text service on the port ("Connected: ...") reads as size 0x436f, type 'n'
+    assert c.split_packages(b"Connected: Universal") == ([], b"Connected: Universal")
+    with pytest.raises(c.RTDECodecError, match=r"unknown package type 110 \(0x6e\)"):
+        c.split_packages(b"Connected: Universal", strict=True)
+    v = c.encode_request_protocol_version()
+    assert c.split_packages(v + v[:3], strict=True) == ([c.Package(ord("V"), b"\x00\x02")], v[:3])
+
+
 def test_wrong_lengths_raise() -> None:
     with pytest.raises(c.RTDECodecError, match="needs 6 values"):
         c.pack_values(["VECTOR6D"], [(1.0, 2.0)])
