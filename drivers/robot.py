@@ -33,12 +33,15 @@ Relative paths (``map.yaml``) are relative to the config file.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import logging
 import math
+import signal
+import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -550,13 +553,40 @@ def build(
     for step in ctx.prepare:
         step()
     try:
-        for slot, label, _mark, connect in plans:
-            log.info("robot: bringing up %s: %s", slot, label)
-            setattr(robot, slot, connect())
+        with _sigint_aborts():
+            for slot, label, _mark, connect in plans:
+                log.info("robot: bringing up %s: %s", slot, label)
+                setattr(robot, slot, connect())
     except BaseException:
         robot.close()
         raise
     return robot
+
+
+@contextlib.contextmanager
+def _sigint_aborts() -> Iterator[None]:
+    """While devices come up, Ctrl-C (SIGINT) ends the bring-up with KeyboardInterrupt
+    (``build`` closes what was opened), after the SIGINT handler installed before has run.
+    The runner's handler only records the signal for a tree that does not exist yet, so a
+    device waiting out its connect deadline (a UR controller that never answers: up to
+    ``connect_timeout``) would otherwise keep Ctrl-C waiting. Main thread only; an
+    ignored or default SIGINT is left alone."""
+    previous = signal.getsignal(signal.SIGINT)
+    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+        yield
+        return
+
+    chained = previous  # narrowed to the handler function
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        chained(signum, frame)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def check(section: YDict | None, *, profile: Mapping[str, Any] | None = None) -> list[str]:

@@ -1,11 +1,22 @@
 """UR e-series arm as an :class:`~mmexec.drivers.interfaces.Arm`, through ur_rtde.
 
-Threading: every ur_rtde call (constructors, moves, reads, stops, disconnect) runs in
-one dedicated worker thread, ``ur-rtde-<host>``; the tick thread only posts commands and
-reads a cache, so nothing here blocks a tick. Each call has a deadline (``connect_timeout``
-for the constructors, ``command_timeout`` for everything else): a call that overruns it
-fails the running goal with ``connection lost: ur_rtde <call> did not return within ...``
-as soon as the goal is next polled, and the link is torn down when the call returns.
+Threading: every ur_rtde call (constructors, moves, reads, stops, disconnect) is made
+from one dedicated worker thread, ``ur-rtde-<host>``; the tick thread only posts commands
+and reads a cache, so nothing here blocks a tick. Each call has a deadline
+(``connect_timeout`` for the whole connect, ``command_timeout`` for everything else): a
+call that overruns it fails the running goal with ``connection lost: ur_rtde <call> did
+not return within ...`` as soon as the goal is next polled, and the link is torn down.
+
+Processes: the ur_rtde objects themselves live in a host process
+(:mod:`mmexec.drivers.ur.rtde_host`), because ur_rtde's constructors hold the GIL with no
+deadline: in this process a controller that accepts TCP and never answers (or answers
+garbage) froze every thread and made Ctrl-C do nothing. Before the host is asked to
+construct anything, a pure-Python RTDE handshake (:mod:`mmexec.drivers.ur.rtde_client`)
+must succeed within the same ``connect_timeout``: it names the precise reason (refused,
+silent, not RTDE, ``NOT_FOUND``) in one line, and the host bounds what remains (a
+controller that answers the check and then stalls ur_rtde; the dashboard and script
+ports the control interface also uses). So :meth:`URArm.open` fails within
+``connect_timeout`` plus a fraction of a second, and a signal handler runs at once.
 
 Motion: :meth:`URArm.follow` streams ``servoJ`` at ``frequency`` [Hz] along the
 trajectory, linearly interpolated in clock time from the current position (one servo
@@ -31,7 +42,6 @@ from __future__ import annotations
 
 import logging
 import math
-import socket
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -52,15 +62,21 @@ from mmexec.drivers.interfaces import (
     MonotonicClock,
 )
 from mmexec.drivers.ur import model as urmodel
+from mmexec.drivers.ur.rtde_client import RTDEClientError, RTDESession, probe
+from mmexec.drivers.ur.rtde_host import RTDEHost, call_all
+from mmexec.drivers.ur.states import ROBOT_MODES, RUNTIME_STATES, SAFETY_MODES, running_fault
 
 __all__ = [
+    "DISCONNECT_ALLOWANCE",
     "RECEIVE_VARIABLES",
+    "ROBOT_MODES",
     "RTDE_PORT",
+    "RUNTIME_STATES",
+    "SAFETY_MODES",
     "URArm",
     "URArmConfig",
     "URConnectionError",
     "URStatus",
-    "probe_port",
 ]
 
 log = logging.getLogger(__name__)
@@ -81,17 +97,14 @@ RECEIVE_VARIABLES: tuple[str, ...] = (
     "robot_status_bits",
 )
 
-ROBOT_MODES = {
-    -1: "no controller", 0: "disconnected", 1: "confirm safety", 2: "booting", 3: "power off",
-    4: "power on", 5: "idle", 6: "backdrive", 7: "running", 8: "updating firmware",
-}
-SAFETY_MODES = {
-    1: "normal", 2: "reduced", 3: "protective stop", 4: "recovery", 5: "safeguard stop",
-    6: "system emergency stop", 7: "robot emergency stop", 8: "violation", 9: "fault",
-    10: "validate joint id", 11: "undefined", 12: "automatic-mode safeguard stop",
-    13: "three-position-enabling stop",
-}
-RUNTIME_STATES = {0: "stopping", 1: "stopped", 2: "playing", 3: "pausing", 4: "paused", 5: "resuming"}
+#: [s] added to ``command_timeout`` for ``disconnect()``: ur_rtde 1.6.5's takes 0.5 s
+#: even on a healthy link (measured against the RTDE stub)
+DISCONNECT_ALLOWANCE = 1.0
+#: [s] :meth:`URArm.open` waits this long past the connect deadline for the worker's own
+#: reason (every step of a connect ends by that deadline)
+_REASON_GRACE = 0.25
+#: ur_rtde error texts that concern another port of the controller than RTDE's
+_VENDOR_PORTS = (("dashboard", 29999), ("script", 30003))
 
 
 class URConnectionError(CapabilityError):
@@ -151,24 +164,6 @@ class URStatus:
     runtime_state: int
     fault: str
     stamp: float
-
-
-def probe_port(host: str, port: int, timeout: float) -> None:
-    """Check that ``host:port`` accepts a TCP connection within ``timeout`` s.
-
-    Used before handing a host to ur_rtde, whose constructors hold the GIL while the OS
-    connect timeout runs. Raises :class:`URConnectionError` with a one-line reason.
-    """
-    try:
-        with socket.create_connection((host, port), timeout=timeout):
-            return
-    except ConnectionRefusedError:
-        detail = "connection refused (is the controller on and RTDE enabled?)"
-    except TimeoutError:
-        detail = f"no answer within {timeout:.1f} s"
-    except OSError as e:
-        detail = str(e.strerror or e)
-    raise URConnectionError(f"{host}:{port}: {detail}", detail)
 
 
 ControlFactory = Callable[[str, float], Any]
@@ -232,7 +227,13 @@ class URArm(Arm):
         self._watched: list[Goal] = []
         self._inflight: tuple[str, float, float] | None = None  # name, deadline, timeout
         self._stalled = ""
+        # the connect in progress and what it may block on (under _lock: open() and
+        # close() abort them from the calling thread)
+        self._connecting: Goal | None = None
+        self._preflight: RTDESession | None = None
+        self._host: RTDEHost | None = None
         # worker-only
+        self._connect_deadline = 0.0
         self._ctl: Any = None
         self._rcv: Any = None
         self._link_lost = "not connected"
@@ -242,16 +243,47 @@ class URArm(Arm):
 
     # ------------------------------------------------------------------ default factories
     def _default_receive(self, host: str, frequency: float) -> Any:
-        import rtde_receive
-
-        probe_port(host, RTDE_PORT, self.config.connect_timeout)
-        return rtde_receive.RTDEReceiveInterface(host, frequency, list(RECEIVE_VARIABLES))
+        """Pre-flight RTDE handshake in Python, then ``RTDEReceiveInterface`` in the host
+        process (worker thread; both within the connect deadline)."""
+        session = RTDESession(host, RTDE_PORT, self.config.connect_timeout, deadline=self._connect_deadline)
+        with self._lock:
+            self._preflight = session
+        try:
+            probe(session, RECEIVE_VARIABLES)
+        except RTDEClientError as e:
+            raise URConnectionError(str(e), e.detail) from None
+        finally:
+            with self._lock:
+                self._preflight = None
+        return self._vendor("rtde_receive", "RTDEReceiveInterface", host, frequency, list(RECEIVE_VARIABLES))
 
     def _default_control(self, host: str, frequency: float) -> Any:
-        import rtde_control
+        """``RTDEControlInterface`` in the host process (after :meth:`_default_receive`)."""
+        return self._vendor("rtde_control", "RTDEControlInterface", host, frequency)
 
-        probe_port(host, RTDE_PORT, self.config.connect_timeout)
-        return rtde_control.RTDEControlInterface(host, frequency)
+    def _vendor(self, module: str, cls: str, *args: Any) -> Any:
+        """Construct a ur_rtde interface in this connection's host process (started on
+        first use) within what is left of the connect deadline."""
+        with self._lock:
+            rtde_host = self._host
+            if rtde_host is None:
+                rtde_host = self._host = RTDEHost(self.config.host)
+                fresh = True
+            else:
+                fresh = False
+        if fresh:
+            rtde_host.start(self._connect_left())
+        return rtde_host.construct(module, cls, args, timeout=self._connect_left(),
+                                   call_timeout=self.config.command_timeout,
+                                   method_timeouts={"disconnect": self._disconnect_timeout})
+
+    @property
+    def _disconnect_timeout(self) -> float:
+        return self.config.command_timeout + DISCONNECT_ALLOWANCE
+
+    def _connect_left(self) -> float:
+        """Seconds left before the connect deadline (worker thread)."""
+        return max(0.0, self._connect_deadline - time.monotonic())
 
     # ------------------------------------------------------------------ Arm API
     @property
@@ -291,35 +323,63 @@ class URArm(Arm):
             return self._status.connected
 
     def connect(self) -> Goal:
-        """Start connecting (constructs both interfaces in the worker); returns at once."""
-        goal = self._new_goal("connect")
-        self._post("connect", goal)
-        return goal
+        """Start connecting (constructs both interfaces in the worker) within
+        ``connect_timeout``; returns at once."""
+        return self._start_connect("connect", time.monotonic() + self.config.connect_timeout)
 
     def reconnect(self) -> Goal:
         """Drop the current interfaces (if any) and connect again; returns at once."""
-        goal = self._new_goal("reconnect")
-        self._post("connect", goal)
+        return self._start_connect("reconnect", time.monotonic() + self.config.connect_timeout)
+
+    def _start_connect(self, name: str, deadline: float) -> Goal:
+        goal = self._new_goal(name)
+        self._post("connect", goal, deadline)
         return goal
 
     def open(self, timeout: float | None = None) -> None:
         """Connect and wait (bounded) for the result: for setup, not for ticks.
 
-        Raises :class:`URConnectionError` with a one-line reason on failure or timeout.
+        Returns or raises within ``timeout`` (default ``connect_timeout``) plus 0.25 s,
+        whatever the controller does; an exception while waiting (KeyboardInterrupt from
+        Ctrl-C) abandons the connect, closes the adapter and propagates. Raises
+        :class:`URConnectionError` with a one-line reason naming host and port on failure
+        or timeout (the caller closes the adapter).
         """
         limit = timeout if timeout is not None else self.config.connect_timeout
-        goal = self.connect()
         deadline = time.monotonic() + limit
+        goal = self._start_connect("connect", deadline)
         done = threading.Event()
-        while not goal.done():
-            left = deadline - time.monotonic()
-            if left <= 0:
-                goal.fail(f"no answer within {limit:.1f} s")
-                self._unwatch(goal)
-                break
-            done.wait(min(left, 0.01))
+        try:
+            while not goal.done():
+                left = deadline + _REASON_GRACE - time.monotonic()
+                if left <= 0:
+                    goal.fail(f"no answer within {limit:.1f} s")
+                    break
+                done.wait(min(left, 0.01))
+        except BaseException:
+            goal.fail("interrupted")
+            self._unwatch(goal)
+            self._abort_connect(goal)
+            self.close()
+            raise
         if goal.state is not GoalState.SUCCEEDED:
-            raise URConnectionError(f"UR {self.config.host}:{RTDE_PORT}: {goal.reason}")
+            self._unwatch(goal)
+            self._abort_connect(goal)
+            raise URConnectionError(f"UR {self.config.host}:{_reason_port(goal.reason)}: {goal.reason}", goal.reason)
+
+    def _abort_connect(self, goal: Goal | None) -> None:
+        """End the connect of ``goal`` (None: whichever runs) now, from any thread: the
+        pre-flight session is shut down and the host process killed, so the worker's
+        blocking step returns at once."""
+        with self._lock:
+            if self._connecting is None or (goal is not None and self._connecting is not goal):
+                return
+            session, rtde_host = self._preflight, self._host
+        reason = goal.reason if goal is not None and goal.reason else "connect abandoned"
+        if session is not None:
+            session.abort()
+        if rtde_host is not None:
+            rtde_host.kill(reason)
 
     def follow(self, trajectory: JointTrajectory) -> Goal:
         """Stream ``trajectory`` with servoJ; limits are checked before anything is sent."""
@@ -373,13 +433,16 @@ class URArm(Arm):
         self._post("stop")
 
     def close(self, timeout: float | None = None) -> None:
-        """Stop the arm (servoStop, stopJ), disconnect both interfaces, join the worker.
+        """Stop the arm (servoStop, stopJ), disconnect both interfaces, end the host
+        process, join the worker. A connect still in progress is abandoned at once.
 
-        Blocks at most ``timeout`` s (default ``2 * command_timeout + 1``)."""
+        Blocks at most ``timeout`` s (default ``3 * command_timeout + 2``: the two stop
+        calls and the disconnects, each with its deadline, and the host's exit)."""
+        self._abort_connect(None)
         self._post("close")
         t = self._thread
         if t is not None:
-            t.join(timeout if timeout is not None else 2 * self.config.command_timeout + 1.0)
+            t.join(timeout if timeout is not None else 3 * self.config.command_timeout + 2.0)
             if t.is_alive():
                 log.warning("UR %s: worker still inside a ur_rtde call after close(); left as daemon", self.config.host)
         self._thread = None
@@ -470,11 +533,15 @@ class URArm(Arm):
         self._wake.set()
 
     # ------------------------------------------------------------------ worker
-    def _call(self, name: str, fn: Callable[..., Any], *args: Any, timeout: float | None = None) -> Any:
-        """Run one ur_rtde call with a deadline the tick side watches (worker thread only)."""
+    def _call(self, name: str, fn: Callable[..., Any], *args: Any, timeout: float | None = None,
+              grace: float = 0.0) -> Any:
+        """Run one ur_rtde call with a deadline the tick side watches (worker thread only).
+
+        ``grace`` [s]: the tick side waits this much longer, for a call that bounds
+        itself by ``timeout`` and then names its own, more precise reason."""
         t = timeout if timeout is not None else self.config.command_timeout
         with self._lock:
-            self._inflight = (name, time.monotonic() + t, t)
+            self._inflight = (name, time.monotonic() + t + grace, t)
         try:
             result = fn(*args)
         finally:
@@ -519,7 +586,7 @@ class URArm(Arm):
     def _handle(self, cmd: tuple[Any, ...]) -> None:
         kind = cmd[0]
         if kind == "connect":
-            self._do_connect(cmd[1])
+            self._do_connect(cmd[1], cmd[2])
         elif kind == "motion":
             self._start_motion(cmd[1])
         elif kind == "cancel":
@@ -529,36 +596,55 @@ class URArm(Arm):
         elif kind == "stop" and self._motion is None and self._ctl is not None and not self._link_lost:
             self._call("stopJ", self._ctl.stopJ, self.config.stop_deceleration, True)
 
-    def _do_connect(self, goal: Goal) -> None:
+    def _do_connect(self, goal: Goal, deadline: float) -> None:
         self._disconnect_all()
         with self._lock:
             self._stalled = ""
-        host, freq = self.config.host, self.config.frequency
+            self._connecting = goal
+        self._connect_deadline = deadline
+        try:
+            self._connect(goal)
+        finally:
+            with self._lock:
+                self._connecting = None
+
+    def _connect_step(self, goal: Goal, name: str, factory: Callable[[str, float], Any]) -> Any:
+        if goal.done():  # open() gave up meanwhile: do not go on connecting
+            raise _Stalled(goal.reason or "gave up")
+        left = self._connect_left()
+        if left <= 0:
+            detail = f"no answer within {self.config.connect_timeout:.1f} s (before {name})"
+            raise URConnectionError(detail, detail)
+        return self._call(name, factory, self.config.host, self.config.frequency, timeout=left, grace=_REASON_GRACE)
+
+    def _connect(self, goal: Goal) -> None:
+        host = self.config.host
         rcv = ctl = None
         try:
-            rcv = self._call("RTDEReceiveInterface()", self._receive_factory, host, freq, timeout=self.config.connect_timeout)
-            if goal.done():  # open() gave up meanwhile: do not go on connecting
-                raise _Stalled(goal.reason or "gave up", rcv)
-            ctl = self._call("RTDEControlInterface()", self._control_factory, host, freq, timeout=self.config.connect_timeout)
+            rcv = self._connect_step(goal, "RTDEReceiveInterface()", self._receive_factory)
+            ctl = self._connect_step(goal, "RTDEControlInterface()", self._control_factory)
         except (RuntimeError, URConnectionError, _Stalled) as e:
             with self._lock:
                 self._stalled = ""
             late_result = e.result if isinstance(e, _Stalled) else None
             for late in (ctl, rcv, late_result):
                 self._safe_disconnect(late)
-            reason = _one_line(e)
+            self._close_host()
             with self._lock:
                 self._stalled = ""
             if isinstance(e, URConnectionError):
                 reason = e.detail
             elif isinstance(e, RuntimeError):
-                reason = f"cannot connect: {reason}"
+                reason = f"cannot connect: {_one_line(e)}"
+            else:
+                reason = _one_line(e)
             goal.fail(reason)
             self._unwatch(goal)
             return
         if goal.done():  # gave up waiting (open() timed out): do not keep a late link
             self._safe_disconnect(ctl)
             self._safe_disconnect(rcv)
+            self._close_host()
             return
         self._rcv, self._ctl, self._link_lost = rcv, ctl, ""
         self._last_ts = None
@@ -572,12 +658,14 @@ class URArm(Arm):
         """Read the receive interface into the cache; return the fault reason ("" if fine)."""
         r, c = self._rcv, self._ctl
 
-        def read_all() -> tuple[Any, ...]:
-            return (r.isConnected() and c.isConnected(), r.getTimestamp(), r.getActualQ(), r.getActualQd(),
-                    r.getActualCurrent(), r.getActualTCPPose(), r.getRobotMode(), r.getSafetyMode(),
-                    r.getSafetyStatusBits(), r.getRuntimeState())
+        def read_all() -> list[Any]:  # one round trip to the host process
+            return call_all([(r, "isConnected"), (c, "isConnected"), (r, "getTimestamp"), (r, "getActualQ"),
+                             (r, "getActualQd"), (r, "getActualCurrent"), (r, "getActualTCPPose"),
+                             (r, "getRobotMode"), (r, "getSafetyMode"), (r, "getSafetyStatusBits"),
+                             (r, "getRuntimeState")])
 
-        conn, ts, q, qd, cur, tcp, rmode, smode, sbits, rt = self._call("receive getters", read_all)
+        r_conn, c_conn, ts, q, qd, cur, tcp, rmode, smode, sbits, rt = self._call("receive getters", read_all)
+        conn = r_conn and c_conn
         now = self.clock.now()
         fault = ""
         if not conn:
@@ -589,7 +677,7 @@ class URArm(Arm):
                 fault = (f"connection lost: no new RTDE data from {self.config.host} for "
                          f"{now - self._last_fresh:.2f} s")
         if not fault:
-            fault = _controller_fault(int(rmode), int(smode), int(sbits), int(rt))
+            fault = running_fault(int(rmode), int(smode), int(sbits), int(rt))
         with self._lock:
             self._state = JointState(urmodel.JOINT_NAMES, tuple(q), tuple(qd), tuple(cur), now)
             self._tcp_pose = list(tcp)
@@ -728,7 +816,7 @@ class URArm(Arm):
         if iface is None:
             return
         try:
-            self._call("disconnect", iface.disconnect)
+            self._call("disconnect", iface.disconnect, timeout=self._disconnect_timeout)
         except (RuntimeError, _Stalled) as e:  # doc 4.3: disconnect() may raise "Broken pipe"
             log.info("UR %s: disconnect: %s", self.config.host, _one_line(e))
 
@@ -737,6 +825,14 @@ class URArm(Arm):
         self._ctl = self._rcv = None
         self._safe_disconnect(ctl)
         self._safe_disconnect(rcv)
+        self._close_host()
+
+    def _close_host(self) -> None:
+        """End this connection's ur_rtde host process, if any (after the disconnects)."""
+        with self._lock:
+            rtde_host, self._host = self._host, None
+        if rtde_host is not None:
+            rtde_host.close()
 
     def _teardown(self, reason: str) -> None:
         """Leave the arm stopped and disconnected (worker thread, on close)."""
@@ -760,21 +856,14 @@ class URArm(Arm):
             g.fail(reason)
 
 
-def _controller_fault(robot_mode: int, safety_mode: int, safety_bits: int, runtime_state: int) -> str:
-    """Reason the controller cannot move the arm now, or ""."""
-    if safety_mode == 3 or safety_bits & (1 << 2):
-        return "protective stop"
-    if safety_mode in (6, 7) or safety_bits & (1 << 7):
-        return f"emergency stop ({SAFETY_MODES.get(safety_mode, safety_mode)})"
-    if safety_mode in (5, 12, 13):
-        return f"safeguard stop ({SAFETY_MODES[safety_mode]})"
-    if safety_mode not in (1, 2):
-        return f"safety fault (safety mode {safety_mode}: {SAFETY_MODES.get(safety_mode, 'unknown')})"
-    if runtime_state != 2:
-        return f"program stopped (runtime state {runtime_state}: {RUNTIME_STATES.get(runtime_state, 'unknown')})"
-    if robot_mode != 7:
-        return f"robot not running (robot mode {robot_mode}: {ROBOT_MODES.get(robot_mode, 'unknown')})"
-    return ""
+def _reason_port(reason: str) -> int:
+    """The controller port a connect failure concerns: RTDE's, unless ur_rtde named the
+    dashboard server (29999) or the script it uploads (30003)."""
+    low = reason.lower()
+    for word, port in _VENDOR_PORTS:
+        if word in low:
+            return port
+    return RTDE_PORT
 
 
 def _sample(times: Sequence[float], points: np.ndarray, t: float) -> np.ndarray:

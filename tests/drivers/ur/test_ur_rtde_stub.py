@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import threading
 import time
 from collections.abc import Iterator
 
 import pytest
 import rtde_receive
-from urtest_helpers import start_stub, wait_for
+from urtest_helpers import host_processes, start_stub, wait_for
 
 from mmexec.drivers.interfaces import GoalState, ManualClock
 from mmexec.drivers.ur import bringup
@@ -126,13 +128,50 @@ def test_adapter_refused_and_not_found_are_one_line(stub: RTDEStub) -> None:
     with pytest.raises(URConnectionError) as e:
         arm.open()
     arm.close()
-    assert "\n" not in str(e.value) and "[actual_TCP_pose]" in str(e.value)
+    # the pre-flight handshake finds it before ur_rtde is asked to construct anything
+    assert str(e.value) == f"UR {stub.host}:30004: controller answered NOT_FOUND for actual_TCP_pose"
     stub.refuse_connections(True)
     arm, _ = _arm_on_stub(stub)
     with pytest.raises(URConnectionError) as e:
         arm.open()
     arm.close()
     assert str(e.value) == f"UR {stub.host}:30004: connection refused (is the controller on and RTDE enabled?)"
+
+
+def test_adapter_open_on_a_stalling_controller_fails_within_its_deadline(stub: RTDEStub) -> None:
+    stub.silence(after=1)  # the handshake check is served, ur_rtde's own connection is not
+    baseline = threading.active_count()
+    arm = URArm(URArmConfig(host=stub.host, connect_timeout=1.0))
+    with pytest.raises(URConnectionError) as e:
+        arm.open()
+    arm.close()
+    assert str(e.value).startswith(
+        f"UR {stub.host}:30004: cannot connect: ur_rtde RTDEReceiveInterface() did not return within")
+    assert wait_for(lambda: host_processes(os.getpid()) == [] and threading.active_count() <= baseline, 30.0)
+
+
+def test_adapter_open_interrupted_leaves_nothing_behind(stub: RTDEStub) -> None:
+    stub.silence(after=1)
+    baseline = threading.active_count()
+    arm = URArm(URArmConfig(host=stub.host, connect_timeout=600.0))  # only the interrupt ends it
+
+    def ctrl_c_once_ur_rtde_waits() -> None:
+        if wait_for(lambda: stub.stats()["accepted"] >= 2 and len(host_processes(os.getpid())) == 1, 60.0):
+            os.kill(os.getpid(), signal.SIGALRM)
+
+    def on_alarm(signum: int, frame: object) -> None:  # stands in for Ctrl-C's KeyboardInterrupt
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGALRM, on_alarm)
+    try:
+        threading.Thread(target=ctrl_c_once_ur_rtde_waits, daemon=True).start()
+        with pytest.raises(KeyboardInterrupt):
+            arm.open()
+    finally:
+        signal.signal(signal.SIGALRM, previous)
+    # open() closed the adapter: the host process was killed, the worker ended
+    assert wait_for(lambda: host_processes(os.getpid()) == [] and threading.active_count() <= baseline, 30.0)
+    assert arm.status().fault == "closed"
 
 
 def _ping_args(host: str, port: int = 30004, timeout: float = 1.0) -> argparse.Namespace:

@@ -7,6 +7,7 @@ import random
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 from mmexec.drivers.interfaces import Goal, ManualClock
 from mmexec.drivers.ur.arm import URArm
@@ -34,6 +35,22 @@ def start_stub(attempts: int = 20) -> RTDEStub:
             error = e
     assert error is not None
     raise error
+
+
+def host_processes(parent: int) -> list[int]:
+    """Pids of the ur_rtde host processes (:mod:`mmexec.drivers.ur.rtde_host`) started by
+    process ``parent`` that are still running (zombies show an empty command line)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            argv = (entry / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"mmexec.drivers.ur.rtde_host" in argv and str(parent).encode() in argv:
+            found.append(int(entry.name))
+    return found
 
 
 def wait_for(pred: Callable[[], bool], timeout: float = 2.0) -> bool:
