@@ -1,173 +1,220 @@
 """Bring-up commands for the UR arm: ``mmexec hw ping ur`` and ``mmexec hw fake ur``.
 
-``ping`` first speaks RTDE itself (our codec over a socket with a deadline on every read:
-``V``, ``v``, ``O``, ``S``, one ``U``, ``P``), because ur_rtde's constructors hold the GIL
-while the OS connect timeout runs and take no port. That gives the controller version and
-one-line reasons (connection refused, no answer within the deadline, ``NOT_FOUND``
-variables). On port 30004 it then connects the real ``RTDEReceiveInterface`` in a worker
-thread with the same deadline and prints what it reads.
+``ping`` reads the controller through RTDE twice, each step within ``--timeout``:
+
+1. with our own client (:mod:`mmexec.drivers.ur.rtde_client`: pure Python, a deadline on
+   every answer): ``V``, ``v``, ``O``, ``S``, then every data package for ``--duration``
+   seconds at ``--frequency`` (state and link quality), ``P``;
+2. on port 30004, with ur_rtde's ``RTDEReceiveInterface`` in a host process
+   (:mod:`mmexec.drivers.ur.rtde_host`), which must connect and read, as the arm driver's
+   will (ur_rtde's constructors hold the GIL with no deadline: in this process a silent
+   controller would freeze the command and Ctrl-C).
+
+It prints::
+
+    ur 192.168.1.10:30004: controller 5.15.0.12345
+      robot mode 7 (running), safety mode 1 (normal), runtime state 1 (stopped)
+      joints [rad]: +0.0000 -1.5708 +1.5708 -1.5708 -1.5708 +0.0000
+      link: 500 frames, 0 lost, 0 late over 1.0 s (0.0 %)
+
+Link quality: *lost* frames are those the controller's timestamps show were never
+received (it stamps every sample; a gap of k periods is k - 1 lost), *late* ones arrived
+more than ``--late`` seconds behind the best-delivered frame (arrival time minus
+controller timestamp).
+
+Exit status, with at most one line on stderr naming host and port:
+
+* 0: ready. A line ``warning: ...`` when more than 1 % of the frames were lost or late.
+* 1: the controller answered but the arm is not fit to run: a frame during the ping showed
+  it powered off or with its brakes engaged (robot mode other than 7, running), or a
+  protective, emergency or safeguard stop or another safety fault (safety mode other than
+  1 normal or 2 reduced); or it did not answer usefully: no answer within ``--timeout``,
+  bytes that are not RTDE, ``NOT_FOUND`` variables, a refused request, the connection
+  closed during the ping, ur_rtde failing to connect or read.
+* 2: bad input (``--timeout``, ``--duration``, ``--late`` outside (0, 60] s,
+  ``--frequency`` outside (0, 500] Hz, ``--port`` outside 1..65535) or no connection could
+  be opened (refused, no route to host, unknown host, connect timeout).
+
+Not judged: the runtime state (ur_rtde's control interface uploads and starts its own
+control script, so a stopped program is the normal state before a run; once the driver
+runs, anything but "playing" is a fault it reports) and remote control (PolyScope 5.6
+and later refuse the control script in local mode; that is read from the dashboard
+server, whose protocol hardware-protocols.md does not describe, so the run's bring-up
+reports it: ur_rtde's "Please enable remote control on the robot!" in one line).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import signal
-import socket
 import sys
 import threading
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from mmexec.drivers.ur import rtde_codec as codec
-from mmexec.drivers.ur.rtde_codec import PackageType
+from mmexec.drivers.ur import states
+from mmexec.drivers.ur.rtde_client import (
+    LinkStats,
+    RTDEClientError,
+    RTDESession,
+    RTDEUnreachable,
+    link_quality,
+)
+from mmexec.drivers.ur.rtde_codec import ControllerVersion
 
-__all__ = ["PingResult", "URPingError", "add_fake_arguments", "add_ping_arguments", "ping", "probe", "run_fake"]
+__all__ = [
+    "LINK_WARN_RATIO",
+    "PING_VARIABLES",
+    "PingResult",
+    "add_fake_arguments",
+    "add_ping_arguments",
+    "ping",
+    "read_controller",
+    "run_fake",
+]
 
-PING_VARIABLES: tuple[str, ...] = ("timestamp", "actual_q", "robot_mode", "safety_mode", "runtime_state")
-
-
-class URPingError(RuntimeError):
-    """The controller did not answer as expected; the message is one line naming host:port."""
+RTDE_PORT = 30004
+PING_VARIABLES: tuple[str, ...] = (
+    "timestamp", "actual_q", "robot_mode", "safety_mode", "safety_status_bits", "runtime_state",
+)
+#: ping warns when more than this fraction of the frames were lost or late
+LINK_WARN_RATIO = 0.01
+_MAX_WAIT = 60.0  # s, upper bound of --timeout, --duration and --late
+_MAX_FREQUENCY = 500.0  # Hz, e-series RTDE rate
+_CB3_FREQUENCY = 125.0  # Hz, CB3 (controller major version below 5) RTDE rate
 
 
 @dataclass(frozen=True)
 class PingResult:
-    """What one RTDE round trip read: version, modes, joints [rad]."""
+    """What a ping read: the controller version, every frame's values by name (in
+    arrival order), the link quality and each distinct fault seen (in order)."""
 
-    version: codec.ControllerVersion
-    robot_mode: int
-    safety_mode: int
-    runtime_state: int
-    q: tuple[float, ...]
-
-
-class _Link:
-    def __init__(self, sock: socket.socket, where: str, timeout: float) -> None:
-        self.sock, self.where, self.timeout, self.buf = sock, where, timeout, b""
-
-    def request(self, frame: bytes, expect: int) -> bytes:
-        self.sock.sendall(frame)
-        return self.receive(expect)
-
-    def receive(self, expect: int) -> bytes:
-        deadline = time.monotonic() + self.timeout
-        while True:
-            packages, self.buf = codec.split_packages(self.buf)
-            for i, p in enumerate(packages):
-                if p.type == expect:
-                    rest = b"".join(codec.encode_package(q.type, q.payload) for q in packages[i + 1 :])
-                    self.buf = rest + self.buf
-                    return p.payload
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise URPingError(f"{self.where}: no answer within {self.timeout:.1f} s (waiting for '{chr(expect)}')")
-            self.sock.settimeout(left)
-            try:
-                chunk = self.sock.recv(65536)
-            except TimeoutError:
-                continue
-            if not chunk:
-                raise URPingError(f"{self.where}: controller closed the connection")
-            self.buf += chunk
+    version: ControllerVersion
+    frames: list[dict[str, Any]]
+    link: LinkStats
+    faults: list[str]
 
 
-def probe(host: str, port: int = 30004, timeout: float = 2.0, variables: Sequence[str] = PING_VARIABLES) -> PingResult:
-    """One RTDE session with a deadline per step; raises :class:`URPingError` (one line)."""
-    where = f"{host}:{port}"
+def read_controller(host: str, port: int, *, timeout: float, duration: float, frequency: float,
+                    late: float) -> PingResult:
+    """Stream :data:`PING_VARIABLES` for ``duration`` s with our RTDE client and judge every
+    frame (:func:`~mmexec.drivers.ur.states.not_fit_reason`). Raises
+    :class:`~mmexec.drivers.ur.rtde_client.RTDEClientError` (one line)."""
+    with RTDESession(host, port, timeout) as session:
+        version = session.open()
+        rate = min(frequency, _CB3_FREQUENCY) if version.major < 5 else frequency
+        session.setup_outputs(rate, PING_VARIABLES)
+        session.start()
+        arrivals: list[float] = []
+        frames: list[dict[str, Any]] = []
+        end = time.monotonic() + duration
+        while not frames or time.monotonic() < end:
+            arrival, values = session.read()
+            arrivals.append(arrival)
+            frames.append(values)
+        session.pause()
+    faults: list[str] = []
+    for v in frames:
+        fault = states.not_fit_reason(int(v["robot_mode"]), int(v["safety_mode"]), int(v["safety_status_bits"]))
+        if fault and fault not in faults:
+            faults.append(fault)
+    stats = link_quality([float(v["timestamp"]) for v in frames], arrivals, 1.0 / rate, late)
+    return PingResult(version, frames, stats, faults)
+
+
+def _vendor_read(host: str, timeout: float) -> str:
+    """Connect ur_rtde's ``RTDEReceiveInterface`` in a host process and read one sample
+    within ``timeout`` s per step; returns "" or the one-line reason it failed."""
+    from mmexec.drivers.ur.rtde_host import RTDEHost, RTDEHostError
+
+    rtde_host = RTDEHost(host)
     try:
-        sock = socket.create_connection((host, port), timeout=timeout)
-    except ConnectionRefusedError:
-        raise URPingError(f"{where}: connection refused (is the controller on and RTDE enabled?)") from None
-    except TimeoutError:
-        raise URPingError(f"{where}: no answer within {timeout:.1f} s") from None
-    except OSError as e:
-        raise URPingError(f"{where}: {e.strerror or e}") from None
-    with sock:
-        link = _Link(sock, where, timeout)
-        try:
-            if not codec.decode_accepted(link.request(codec.encode_request_protocol_version(2), PackageType.REQUEST_PROTOCOL_VERSION)):
-                raise URPingError(f"{where}: controller refused RTDE protocol version 2")
-            version = codec.decode_controller_version(link.request(codec.encode_get_controller_version(), PackageType.GET_URCONTROL_VERSION))
-            rid, types = codec.decode_setup_reply(
-                link.request(codec.encode_setup_outputs(10.0, variables), PackageType.CONTROL_PACKAGE_SETUP_OUTPUTS)
-            )
-            missing = [n for n, t in zip(variables, types) if t == codec.NOT_FOUND]
-            if missing or rid == 0:
-                raise URPingError(f"{where}: controller answered NOT_FOUND for {', '.join(missing) or 'the recipe'}")
-            if not codec.decode_accepted(link.request(codec.encode_start(), PackageType.CONTROL_PACKAGE_START)):
-                raise URPingError(f"{where}: controller refused to start streaming")
-            _, values = codec.decode_data(link.receive(PackageType.DATA_PACKAGE), {rid: types})
-            link.sock.sendall(codec.encode_pause())
-        except codec.RTDECodecError as e:
-            raise URPingError(f"{where}: corrupt RTDE reply ({e})") from None
-        except OSError as e:
-            raise URPingError(f"{where}: {e.strerror or e}") from None
-    v = dict(zip(variables, values))
-    return PingResult(version, int(v["robot_mode"]), int(v["safety_mode"]), int(v["runtime_state"]), tuple(v["actual_q"]))
-
-
-def _receive_in_thread(host: str, timeout: float) -> dict[str, Any]:
-    """Construct ``RTDEReceiveInterface`` in a worker thread with a deadline and read once."""
-    out: dict[str, Any] = {}
-
-    def work() -> None:
-        import rtde_receive
-
-        try:
-            r = rtde_receive.RTDEReceiveInterface(host, 10.0, list(PING_VARIABLES))
-        except RuntimeError as e:
-            out["error"] = " ".join(str(e).split())
-            return
-        try:
-            deadline = time.monotonic() + timeout
-            ev = threading.Event()
-            while r.getTimestamp() == 0.0 and time.monotonic() < deadline:
-                ev.wait(0.01)
-            out.update(q=r.getActualQ(), robot_mode=r.getRobotMode(), safety_mode=r.getSafetyMode())
-        finally:
-            try:
-                r.disconnect()
-            except RuntimeError as e:
-                out.setdefault("warning", str(e))
-
-    t = threading.Thread(target=work, name="ur-ping", daemon=True)
-    t.start()
-    t.join(timeout)
-    if t.is_alive():
-        out["error"] = f"ur_rtde did not connect within {timeout:.1f} s"
-    return out
+        rtde_host.start(timeout)
+        r = rtde_host.construct("rtde_receive", "RTDEReceiveInterface", (host, 10.0, list(PING_VARIABLES)),
+                                timeout=timeout, call_timeout=timeout, method_timeouts={"disconnect": timeout + 1.0})
+        deadline = time.monotonic() + timeout
+        pause = threading.Event()
+        while r.getTimestamp() == 0.0:
+            if time.monotonic() > deadline:
+                return f"ur_rtde connected but read no data within {timeout:.1f} s"
+            pause.wait(0.01)
+        r.getActualQ()
+        r.disconnect()
+    except RTDEHostError as e:  # already names ur_rtde and the call
+        return str(e)
+    except RuntimeError as e:  # ur_rtde's own error
+        return "ur_rtde: " + " ".join(str(e).split())
+    finally:
+        rtde_host.close()
+    return ""
 
 
 def add_ping_arguments(parser: argparse.ArgumentParser) -> None:
     """Arguments of ``mmexec hw ping ur``."""
     parser.add_argument("--host", required=True, help="controller IP address or name")
-    parser.add_argument("--port", type=int, default=30004, help="RTDE port (default 30004)")
-    parser.add_argument("--timeout", type=float, default=2.0, help="deadline per step in seconds (default 2)")
+    parser.add_argument("--port", type=int, default=RTDE_PORT, help="RTDE port (default 30004)")
+    parser.add_argument("--timeout", type=float, default=2.0, metavar="S",
+                        help="deadline for each answer in seconds (default 2)")
+    parser.add_argument("--duration", type=float, default=1.0, metavar="S",
+                        help="seconds to stream state for faults and link quality (default 1)")
+    parser.add_argument("--frequency", type=float, default=_MAX_FREQUENCY, metavar="HZ",
+                        help="RTDE rate for the link check (default 500, the driver's; CB3: 125 at most)")
+    parser.add_argument("--late", type=float, default=0.02, metavar="S",
+                        help="a frame this much behind the best-delivered one counts as late (default 0.02)")
+
+
+def _bad_input(args: argparse.Namespace) -> str:
+    for name in ("timeout", "duration", "late"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and 0 < value <= _MAX_WAIT):
+            return f"--{name} must be a number of seconds in (0, {_MAX_WAIT:g}], got {value}"
+    if not (math.isfinite(args.frequency) and 0 < args.frequency <= _MAX_FREQUENCY):
+        return f"--frequency must be in (0, {_MAX_FREQUENCY:g}] Hz, got {args.frequency}"
+    if not 1 <= args.port <= 65535:
+        return f"--port must be in 1..65535, got {args.port}"
+    return ""
 
 
 def ping(args: argparse.Namespace) -> int:
-    """``mmexec hw ping ur``: 0 when the controller answers, 1 with one line otherwise."""
-    from mmexec.drivers.ur.arm import ROBOT_MODES, RUNTIME_STATES, SAFETY_MODES
-
+    """``mmexec hw ping ur``: exit status and output as the module doc says."""
+    where = f"ur {args.host}:{args.port}"
+    problem = _bad_input(args)
+    if problem:
+        print(f"{where}: {problem}", file=sys.stderr)
+        return 2
     try:
-        res = probe(args.host, args.port, args.timeout)
-    except URPingError as e:
+        res = read_controller(args.host, args.port, timeout=args.timeout, duration=args.duration,
+                              frequency=args.frequency, late=args.late)
+    except RTDEUnreachable as e:
+        print(f"ur {e}", file=sys.stderr)
+        return 2
+    except RTDEClientError as e:
         print(f"ur {e}", file=sys.stderr)
         return 1
-    q = res.q
-    if args.port == 30004:
-        got = _receive_in_thread(args.host, args.timeout)
-        if "error" in got:
-            print(f"ur {args.host}:{args.port}: ur_rtde: {got['error']}", file=sys.stderr)
+    if args.port == RTDE_PORT:
+        failure = _vendor_read(args.host, args.timeout)
+        if failure:
+            print(f"{where}: {failure}", file=sys.stderr)
             return 1
-        q = tuple(got["q"])
-    print(f"ur {args.host}:{args.port}: controller {res.version}")
-    print(f"  robot mode {res.robot_mode} ({ROBOT_MODES.get(res.robot_mode, '?')}), "
-          f"safety mode {res.safety_mode} ({SAFETY_MODES.get(res.safety_mode, '?')}), "
-          f"runtime state {res.runtime_state} ({RUNTIME_STATES.get(res.runtime_state, '?')})")
-    print("  joints [rad]: " + " ".join(f"{x:+.4f}" for x in q))
+    last = res.frames[-1]
+    rm, sm, rt = int(last["robot_mode"]), int(last["safety_mode"]), int(last["runtime_state"])
+    print(f"{where}: controller {res.version}")
+    print(f"  robot mode {rm} ({states.ROBOT_MODES.get(rm, '?')}), "
+          f"safety mode {sm} ({states.SAFETY_MODES.get(sm, '?')}), "
+          f"runtime state {rt} ({states.RUNTIME_STATES.get(rt, '?')})")
+    print("  joints [rad]: " + " ".join(f"{x:+.4f}" for x in last["actual_q"]))
+    print(f"  link: {res.link}")
+    poor_link = res.link.ratio > LINK_WARN_RATIO
+    link_note = (f"link quality {100 * res.link.ratio:.1f} % lost or late (above {100 * LINK_WARN_RATIO:g} %: "
+                 "check the cable and switch, and that nothing else loads the network or this computer)")
+    if res.faults:
+        print(f"{where}: not fit to run: {'; '.join(res.faults)}" + (f"; also {link_note}" if poor_link else ""),
+              file=sys.stderr)
+        return 1
+    if poor_link:
+        print(f"{where}: warning: {link_note}", file=sys.stderr)
     return 0
 
 

@@ -14,7 +14,7 @@ import rtde_receive
 from urtest_helpers import host_processes, start_stub, wait_for
 
 from mmexec.drivers.interfaces import GoalState, ManualClock
-from mmexec.drivers.ur import bringup
+from mmexec.drivers.ur import bringup, rtde_client
 from mmexec.drivers.ur.arm import MonotonicClock, URArm, URArmConfig, URConnectionError
 from mmexec.drivers.ur.fake import FakeURController
 from mmexec.drivers.ur.rtde_stub import RTDEStub
@@ -198,7 +198,7 @@ def test_ping_failures_are_one_line(stub: RTDEStub, capsys: pytest.CaptureFixtur
     stub.freeze(True)
     assert bringup.ping(_ping_args(stub.host, timeout=0.3)) == 1
     stub.refuse_connections(True)
-    assert bringup.ping(_ping_args(stub.host)) == 1
+    assert bringup.ping(_ping_args(stub.host)) == 2  # cannot open
     out = capsys.readouterr()
     assert out.out == ""  # errors go to stderr, one line each, like every `mmexec hw ping`
     assert out.err.splitlines() == [
@@ -211,6 +211,6 @@ def test_ping_failures_are_one_line(stub: RTDEStub, capsys: pytest.CaptureFixtur
 def test_stub_on_ephemeral_port_with_codec_probe() -> None:
     with RTDEStub("127.0.0.1", 0) as s:
         assert s.port != 0
-        res = bringup.probe(s.host, s.port, timeout=1.0)
-        assert res.robot_mode == 7 and str(res.version) == "5.15.0.12345"
+        res = rtde_client.probe(rtde_client.RTDESession(s.host, s.port, 1.0), bringup.PING_VARIABLES)
+        assert res.values["robot_mode"] == 7 and str(res.version) == "5.15.0.12345"
     assert not s.running()
