@@ -53,9 +53,10 @@ from mmexec.executive.schema import (
     ParamDecl,
     parse_file,
     recovery_key_prefix,
+    recovery_writes,
     type_compatible,
 )
-from mmexec.executive.values import Const, Expr, format_problem, substitute
+from mmexec.executive.values import KEY_RE, Const, Expr, format_problem, substitute
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
 __all__ = [
@@ -291,12 +292,17 @@ class _Builder:
     """Builds the py_trees nodes of one tree from validated specs (one pass, no copies).
 
     Each node kind has one method ``b_<kind>(spec, env, path, name)``; the path of a
-    node is its parent's path, ``/``, its name.
+    node is its parent's path, ``/``, its name. Inside an include that the compiler
+    namespaced (a second include of a file with a recovery, see :func:`_recovery_names`)
+    the recoveries' bookkeeping keys, and every use of them, get the namespace.
     """
 
     def __init__(self, rt: N.Runtime, registry: SkillRegistry) -> None:
         self.rt = rt
         self.registry = registry
+        #: recovery key prefix as the file being built spells it -> its prefix in the tree
+        #: (empty outside namespaced includes)
+        self.prefixes: dict[str, str] = {}
         self.kinds: dict[str, Callable[[NodeSpec, Mapping[str, Expr], str, str], Any]] = {
             "sequence": self.b_sequence,
             "fallback": self.b_fallback,
@@ -320,6 +326,16 @@ class _Builder:
         nm = name or spec.name or self.default_name(spec)
         return self.kinds[spec.kind](spec, env, f"{parent}/{nm}" if parent else nm, nm)
 
+    def key(self, key: str) -> str:
+        """A blackboard key as the file being built spells it -> the key in the tree."""
+        prefix, dot, suffix = key.rpartition(".")
+        new = self.prefixes.get(prefix) if dot and suffix in RECOVERY_SUFFIXES else None
+        return key if new is None else f"{new}.{suffix}"
+
+    def value(self, expr: Expr, env: Mapping[str, Expr]) -> Expr:
+        """``expr`` with the parameters of ``env`` and the keys of the tree."""
+        return substitute(expr, env, self.key if self.prefixes else None)
+
     def b_sequence(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         return N.Sequence(self.rt, path, nm, self.build_children(spec.children, env, path), reactive=spec.opts["reactive"])
 
@@ -336,30 +352,38 @@ class _Builder:
 
     def b_foreach(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         o = spec.opts
-        return N.Foreach(self.rt, path, nm, self.build(spec.children[0], env, path), substitute(o["items"], env), o["key"])
+        child = self.build(spec.children[0], env, path)
+        return N.Foreach(self.rt, path, nm, child, self.value(o["items"], env), self.key(o["key"]))
 
     def b_recovery(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         kids = self.build_children(spec.children, env, path)
         o = spec.opts
         give_up = kids[2] if o["has_give_up"] else None
+        prefix = recovery_key_prefix(spec)
         return N.Recovery(self.rt, path, nm, kids[0], kids[1], give_up, o["max_recoveries"],
-                          key_prefix=recovery_key_prefix(spec))
+                          key_prefix=self.prefixes.get(prefix, prefix))
 
     def b_include(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         sub: FileSpec = spec.opts["file"]
         bindings = spec.opts["bindings"]
         sub_env: dict[str, Expr] = {}
         for pname, d in sub.params.items():
-            sub_env[pname] = substitute(bindings[pname], env) if pname in bindings else Const(d.default)
+            sub_env[pname] = self.value(bindings[pname], env) if pname in bindings else Const(d.default)
         assert sub.tree is not None
-        return N.Subtree(self.rt, path, nm, self.build(sub.tree, sub_env, path))
+        ns = spec.opts.get("namespace")
+        outer = self.prefixes
+        if ns is not None:
+            self.prefixes = {**outer, **{p: outer.get(f"{ns}.{p}", f"{ns}.{p}") for p in spec.opts["prefixes"]}}
+        child = self.build(sub.tree, sub_env, path)
+        self.prefixes = outer
+        return N.Subtree(self.rt, path, nm, child)
 
     def b_retry(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         return N.Retry(self.rt, path, nm, self.build(spec.children[0], env, path), spec.opts["attempts"])
 
     def b_timeout(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         child = self.build(spec.children[0], env, path)
-        return N.Timeout(self.rt, path, nm, child, substitute(spec.opts["seconds"], env))
+        return N.Timeout(self.rt, path, nm, child, self.value(spec.opts["seconds"], env))
 
     def b_repeat(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         return N.Repeat(self.rt, path, nm, self.build(spec.children[0], env, path), spec.opts["times"])
@@ -369,15 +393,16 @@ class _Builder:
 
     def b_condition(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         o = spec.opts
-        return N.Condition(self.rt, path, nm, o["key"], o["op"], substitute(o["value"], env))
+        return N.Condition(self.rt, path, nm, self.key(o["key"]), o["op"], self.value(o["value"], env))
 
     def b_wait(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
-        return N.Wait(self.rt, path, nm, substitute(spec.opts["seconds"], env))
+        return N.Wait(self.rt, path, nm, self.value(spec.opts["seconds"], env))
 
     def b_skill(self, spec: NodeSpec, env: Mapping[str, Expr], path: str, nm: str) -> Any:
         o = spec.opts
-        params = {k: substitute(v, env) for k, v in o["params"].items()}
-        return N.SkillLeaf(self.rt, path, nm, o["skill"], params, o["outputs"])
+        params = {k: self.value(v, env) for k, v in o["params"].items()}
+        outputs = {k: self.key(v) for k, v in o["outputs"].items()} if self.prefixes else o["outputs"]
+        return N.SkillLeaf(self.rt, path, nm, o["skill"], params, outputs)
 
     @staticmethod
     def default_name(spec: NodeSpec) -> str:
@@ -465,8 +490,16 @@ def _recovery_names(
     fs: FileSpec, problems: Problems, memo: dict[Path, dict[str, Mark]], busy: set[Path]
 ) -> dict[str, Mark]:
     """Key prefix -> mark of every recovery node in ``fs``'s tree once includes are
-    expanded (memoised per file). A prefix met twice is a problem, recorded where the
-    second one appears: at the recovery node, or at the include that brings it in."""
+    expanded (memoised per file).
+
+    An include that brings recoveries already in the tree from the same file (the file
+    is included again, directly or through another file) is *namespaced*: its
+    recoveries' prefixes become ``<include name>.<prefix>`` (``opts["namespace"]`` and
+    ``opts["prefixes"]`` for the builder; the keys are added to ``fs.writes``). The first
+    include keeps its prefixes, so a mission that includes such a file once is unchanged.
+    A prefix met twice otherwise (two recoveries with one name, in the file or from an
+    include, or a namespace already taken) is a problem, recorded where the second one
+    appears: at the recovery node, or at the include that brings it in."""
     key = fs.path
     if key in memo:
         return memo[key]
@@ -488,13 +521,22 @@ def _recovery_names(
         sub = spec.opts.get("file")
         if sub is None:
             continue
-        for prefix, where in _recovery_names(sub, problems, memo, busy).items():
+        inner = _recovery_names(sub, problems, memo, busy)
+        path = spec.opts["path"]
+        clashes = [(p, w) for p, w in inner.items() if p in names and names[p] != w]
+        for prefix, where in clashes:
+            problems.add(mark, f"include {path!r}: its recovery {prefix!r} at {where} is already in the tree "
+                               f"(recovery at {names[prefix]}); both would write {_recovery_keys(prefix)}: "
+                               f"give each recovery a distinct `name:`")
+        again = next(((p, w) for p, w in inner.items() if names.get(p) == w), None)
+        if clashes:
+            continue
+        if again is not None:
+            inner = _namespace(fs, spec, inner, again, problems)
+        for prefix, where in inner.items():
             if prefix in names:
-                same = names[prefix] == where
-                problems.add(mark, f"include {spec.opts['path']!r}: its recovery {prefix!r} at {where} is already in the "
-                                   f"tree ({'included before' if same else 'recovery at ' + str(names[prefix])}); both "
-                                   f"would write {_recovery_keys(prefix)}: give each recovery a distinct `name:`"
-                                   + (" (a file with a recovery can be included once)" if same else ""))
+                problems.add(mark, f"include {path!r}: {prefix!r} is already in the tree (recovery at {names[prefix]}): "
+                                   f"{_again(again)}; give this include a distinct `name:`")
             else:
                 names[prefix] = where
     busy.discard(key)
@@ -502,8 +544,29 @@ def _recovery_names(
     return names
 
 
+def _namespace(
+    fs: FileSpec, spec: NodeSpec, inner: dict[str, Mark], again: tuple[str, Mark], problems: Problems
+) -> dict[str, Mark]:
+    """Put the recoveries an include brings (``inner``) under the include's name: the
+    prefixes the tree sees (empty when the name cannot start a key: a problem)."""
+    ns = spec.name or ""
+    if not KEY_RE.fullmatch(f"{ns}.x"):
+        problems.add(spec.mark, f"include {spec.opts['path']!r}: the include's name {ns!r} cannot start a blackboard "
+                                f"key: {_again(again)}; give this include a `name:` (a letter or _ first)")
+        return {}
+    spec.opts["namespace"] = ns
+    spec.opts["prefixes"] = tuple(inner)
+    for prefix in inner:
+        fs.writes.update(recovery_writes(f"{ns}.{prefix}"))
+    return {f"{ns}.{prefix}": where for prefix, where in inner.items()}
+
+
+def _again(again: tuple[str, Mark]) -> str:
+    return f"it brings the recovery {again[0]!r} at {again[1]} again, so its recovery keys go under the include's name"
+
+
 def _recovery_keys(prefix: str) -> str:
-    return ", ".join(f"{prefix}.{suffix}" for suffix in RECOVERY_SUFFIXES)
+    return ", ".join(recovery_writes(prefix))
 
 
 def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY, roots: Iterable[str | Path] = ()) -> Mission:
@@ -518,6 +581,7 @@ def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY, roots: It
         problems.raise_if_any()
         raise InputError.at(Mark(str(path), 1, 1), "mission has no tree")
     specs = [s for s in loader.files.values() if s is not None]
+    _recovery_names(top, problems, {}, set())  # first: it adds the keys of namespaced includes to writes
     # every blackboard key read must be written by something in the mission
     writes: dict[str, type | None] = dict(FAILURE_KEYS)
     for s in specs:
@@ -552,7 +616,6 @@ def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY, roots: It
                     problems.add(d.mark or s.mark, f"request field {r!r} is needed by {s.path.name} but not declared by the mission {top.name}")
                 elif top.requests[r].type is not d.type:
                     problems.add(d.mark or s.mark, f"request field {r!r} is {d.type.__name__} here but {top.requests[r].type.__name__} in the mission {top.name}")
-    _recovery_names(top, problems, {}, set())
     n = top.tree.size
     if n > MAX_TREE_NODES:
         problems.add(top.tree.mark, f"mission has {n} nodes once includes are expanded, more than {MAX_TREE_NODES}")

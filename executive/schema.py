@@ -47,6 +47,7 @@ __all__ = [
     "ParamDecl",
     "parse_file",
     "recovery_key_prefix",
+    "recovery_writes",
 ]
 
 COMPOSITES = ("sequence", "fallback", "parallel", "if")
@@ -93,6 +94,11 @@ MAX_COUNT = 1000
 def recovery_key_prefix(spec: NodeSpec) -> str:
     """The blackboard key prefix of a recovery node: its ``name``, else ``recovery``."""
     return spec.name or "recovery"
+
+
+def recovery_writes(prefix: str) -> dict[str, type]:
+    """The bookkeeping keys a recovery node with key prefix ``prefix`` writes, with their types."""
+    return {f"{prefix}.{suffix}": str if suffix in ("last_failure", "outcome") else int for suffix in RECOVERY_SUFFIXES}
 
 
 @dataclass
@@ -776,9 +782,7 @@ class _Parser:
         spec.opts["has_give_up"] = parts.get("give_up") is not None
         spec.children = [c for c in (parts.get("action"), parts.get("recovery"), parts.get("give_up")) if c is not None]
         self.recoveries.append(spec)
-        name = recovery_key_prefix(spec)
-        for suffix in RECOVERY_SUFFIXES:
-            self.writes[f"{name}.{suffix}"] = str if suffix in ("last_failure", "outcome") else int
+        self.writes.update(recovery_writes(recovery_key_prefix(spec)))
 
 
 def parse_file(

@@ -384,19 +384,23 @@ def parse_value(value: Any, is_param: Any) -> Expr:
     return Const(value)
 
 
-def substitute(expr: Expr, env: Mapping[str, Expr]) -> Expr:
-    """Replace every :class:`ParamRef` by ``env[name]`` (an Expr without ParamRefs)."""
+def substitute(expr: Expr, env: Mapping[str, Expr], keys: Callable[[str], str] | None = None) -> Expr:
+    """Replace every :class:`ParamRef` by ``env[name]`` (an Expr without ParamRefs), and
+    with ``keys`` every blackboard key read by ``keys(key)`` (the values in ``env`` come
+    from the including file, whose keys are already its own, so they are kept)."""
     if isinstance(expr, ParamRef):
         return env[expr.name]
-    if isinstance(expr, (Const, Ref)):
+    if isinstance(expr, Ref):
+        return expr if keys is None or keys(expr.key) == expr.key else Ref(keys(expr.key))
+    if isinstance(expr, Const):
         return expr
     if isinstance(expr, Format):
-        inner = substitute(expr.expr, env)
+        inner = substitute(expr.expr, env, keys)
         return Const(expr.apply(inner.value)) if isinstance(inner, Const) else Format(inner, expr.spec)
     if isinstance(expr, Template):
         parts: list[str | Expr] = []
         for p in expr.parts:
-            q = p if isinstance(p, str) else substitute(p, env)
+            q = p if isinstance(p, str) else substitute(p, env, keys)
             if isinstance(q, Const):
                 q = str(q.value)
             if isinstance(q, Template):
@@ -409,12 +413,12 @@ def substitute(expr: Expr, env: Mapping[str, Expr]) -> Expr:
             return Const("".join(parts))  # type: ignore[arg-type]
         return Template(parts)
     if isinstance(expr, ListExpr):
-        items = [substitute(i, env) for i in expr.items]
+        items = [substitute(i, env, keys) for i in expr.items]
         if all(isinstance(i, Const) for i in items):
             return Const([i.value for i in items])  # type: ignore[attr-defined]
         return ListExpr(items)
     if isinstance(expr, DictExpr):
-        d = {k: substitute(v, env) for k, v in expr.items.items()}
+        d = {k: substitute(v, env, keys) for k, v in expr.items.items()}
         if all(isinstance(i, Const) for i in d.values()):
             return Const({k: i.value for k, i in d.items()})  # type: ignore[attr-defined]
         return DictExpr(d)

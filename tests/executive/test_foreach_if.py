@@ -7,7 +7,6 @@ import pytest
 from py_trees.common import Status
 from test_nodes_support import Harness
 
-from mmexec.config.yamlload import InputError
 from mmexec.executive.compiler import MissionTree
 
 S, F, R, I = Status.SUCCESS, Status.FAILURE, Status.RUNNING, Status.INVALID
@@ -28,12 +27,6 @@ def _each_tick(h: Harness, t: MissionTree, key: str, limit: int = 20) -> tuple[l
         values.append(t.rt.bb.get(key))
         h.robot.spin(0.1)
     return statuses, values
-
-
-def _problems(h: Harness, text: str) -> list[str]:
-    with pytest.raises(InputError) as ei:
-        h.load(text)
-    return str(ei.value).splitlines()
 
 
 FOREACH_PLACES = """
@@ -227,11 +220,11 @@ def test_foreach_reuses_an_included_subtree_with_a_recovery_per_element(h):
 ])
 def test_foreach_mistakes_are_located_errors(h, body, where, message):
     header = "params:\n  n: {type: int, default: 1}\n  places: {type: list, default: []}\n"
-    assert _problems(h, header + "tree:\n  " + body) == [f"{h.tmp / 'm.yaml'}:{where}: {message}"]
+    assert h.problems(header + "tree:\n  " + body) == [f"{h.tmp / 'm.yaml'}:{where}: {message}"]
 
 
 def test_foreach_over_a_blackboard_key_of_another_type_is_a_located_error(h):
-    lines = _problems(h, """
+    lines = h.problems("""
         tree:
           sequence:
             - skill: flaky
@@ -245,7 +238,7 @@ def test_foreach_over_a_blackboard_key_of_another_type_is_a_located_error(h):
 
 
 def test_a_nested_foreach_may_not_rebind_the_enclosing_key(h):
-    lines = _problems(h, """
+    lines = h.problems("""
         tree:
           foreach: [1, 2]
           as: item
@@ -259,7 +252,7 @@ def test_a_nested_foreach_may_not_rebind_the_enclosing_key(h):
 
 
 def test_the_element_type_of_a_literal_list_is_checked_against_skill_parameters(h):
-    lines = _problems(h, """
+    lines = h.problems("""
         tree:
           foreach: [a, b]
           as: t
@@ -356,4 +349,4 @@ def test_an_if_picks_again_on_each_activation(h):
     ("if:\n  then: {skill: succeed}\n", "2:6", "if: expected a child node, got nothing"),
 ])
 def test_if_mistakes_are_located_errors(h, body, where, message):
-    assert f"{h.tmp / 'm.yaml'}:{where}: {message}" in _problems(h, "tree:\n  " + body)
+    assert f"{h.tmp / 'm.yaml'}:{where}: {message}" in h.problems("tree:\n  " + body)

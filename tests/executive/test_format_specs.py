@@ -7,7 +7,6 @@ import pytest
 from py_trees.common import Status
 from test_nodes_support import Harness
 
-from mmexec.config.yamlload import InputError
 from mmexec.executive.values import (
     MAX_FORMAT_WIDTH,
     BadFormat,
@@ -26,12 +25,6 @@ S, F = Status.SUCCESS, Status.FAILURE
 @pytest.fixture
 def h(tmp_path):
     return Harness(tmp_path)
-
-
-def _problems(h: Harness, text: str) -> list[str]:
-    with pytest.raises(InputError) as ei:
-        h.load(text)
-    return str(ei.value).splitlines()
 
 
 # ------------------------------------------------------------------------ values
@@ -128,7 +121,7 @@ def test_a_whole_string_reference_with_a_spec_is_a_string(h):
 
 
 def test_a_spec_that_does_not_fit_a_parameter_is_a_located_error(h):
-    lines = _problems(h, """
+    lines = h.problems("""
         params:
           heading: {type: float, default: 1.5}
         tree:
@@ -140,7 +133,7 @@ def test_a_spec_that_does_not_fit_a_parameter_is_a_located_error(h):
 
 
 def test_a_spec_that_does_not_fit_a_request_field_or_output_is_a_located_error(h):
-    lines = _problems(h, """
+    lines = h.problems("""
         requests:
           item: int
         tree:
@@ -161,7 +154,7 @@ def test_a_spec_that_does_not_fit_a_request_field_or_output_is_a_located_error(h
 
 
 def test_a_bad_spec_in_a_template_is_a_located_error(h):
-    lines = _problems(h, """
+    lines = h.problems("""
         tree:
           skill: succeed
           params: {value: "heading {heading:.2q}"}

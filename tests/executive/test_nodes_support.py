@@ -12,6 +12,7 @@ from typing import Any
 
 from py_trees.common import Status
 
+from mmexec.config.yamlload import InputError
 from mmexec.drivers.interfaces import ManualClock, Robot
 from mmexec.executive.compiler import Mission, MissionTree, load_mission
 from mmexec.executive.context import ExecContext
@@ -58,6 +59,14 @@ class Harness:
 
     def load(self, text: str, name: str = "m.yaml") -> Mission:
         return load_mission(self.write(name, text), self.registry)
+
+    def problems(self, text: str, name: str = "m.yaml") -> list[str]:
+        """The lines of the InputError that compiling ``text`` raises (AssertionError if none)."""
+        try:
+            self.load(text, name)
+        except InputError as e:
+            return str(e).splitlines()
+        raise AssertionError(f"{name} compiled without problems")
 
     def tree(self, text: str, request: dict[str, Any] | None = None, params: dict[str, Any] | None = None) -> MissionTree:
         t = self.load(text).instantiate(self.ctx, request or {}, params)

@@ -227,16 +227,8 @@ def _rec(name=None):
     return RECOVERY.format(name=f", name: {name}" if name else "")
 
 
-def _problems(h, text, name="m.yaml"):
-    from mmexec.config.yamlload import InputError
-
-    with pytest.raises(InputError) as ei:
-        h.load(text, name)
-    return str(ei.value).splitlines()
-
-
 def test_two_recoveries_with_one_name_are_a_located_error(h):
-    lines = _problems(h, f"tree:\n  sequence:\n    - {_rec('grasp')}\n    - {_rec('grasp')}\n")
+    lines = h.problems(f"tree:\n  sequence:\n    - {_rec('grasp')}\n    - {_rec('grasp')}\n")
     assert len(lines) == 1
     assert lines[0].startswith(f"{h.tmp / 'm.yaml'}:4:8: recovery name 'grasp' is already used by the recovery at ")
     assert lines[0].endswith(":3:8; both would write grasp.attempts, grasp.recoveries, grasp.last_failure, "
@@ -245,7 +237,7 @@ def test_two_recoveries_with_one_name_are_a_located_error(h):
 
 def test_two_unnamed_recoveries_are_an_error_even_when_nested(h):
     text = "tree:\n  recovery:\n    action: " + _rec() + "\n    recovery: {skill: succeed}\n    max_recoveries: 1\n"
-    lines = _problems(h, text)
+    lines = h.problems(text)
     assert len(lines) == 1 and ":3:14: recovery name 'recovery' is already used" in lines[0], lines
 
 
@@ -258,18 +250,9 @@ def test_distinct_names_and_includes_once_are_fine(h):
     assert [bb[f"{k}.outcome"] for k in ("a", "b", "inner", "recovery")] == ["success"] * 4
 
 
-def test_a_file_with_a_recovery_included_twice_is_an_error_at_the_second_include(h):
-    h.write("sub.yaml", f"tree: {_rec('approach')}\n")
-    lines = _problems(h, "tree:\n  sequence:\n    - include: sub.yaml\n    - include: sub.yaml\n      name: again\n")
-    assert len(lines) == 1, lines
-    assert lines[0].startswith(f"{h.tmp / 'm.yaml'}:4:7: include 'sub.yaml': its recovery 'approach' at ")
-    assert "sub.yaml:1:8 is already in the tree (included before)" in lines[0]
-    assert lines[0].endswith("give each recovery a distinct `name:` (a file with a recovery can be included once)")
-
-
 def test_recovery_name_clash_between_includer_and_included_file(h):
     h.write("sub.yaml", f"tree: {_rec('grasp')}\n")
-    lines = _problems(h, f"tree:\n  sequence:\n    - {_rec('grasp')}\n    - include: sub.yaml\n")
+    lines = h.problems(f"tree:\n  sequence:\n    - {_rec('grasp')}\n    - include: sub.yaml\n")
     assert len(lines) == 1 and ":4:7: include 'sub.yaml': its recovery 'grasp'" in lines[0], lines
     assert f"is already in the tree (recovery at {h.tmp / 'm.yaml'}:3:8)" in lines[0]
     assert "included once" not in lines[0]
@@ -277,5 +260,5 @@ def test_recovery_name_clash_between_includer_and_included_file(h):
 
 def test_duplicate_inside_an_included_file_is_reported_once_in_that_file(h):
     h.write("sub.yaml", f"tree:\n  sequence:\n    - {_rec('x')}\n    - {_rec('x')}\n")
-    lines = _problems(h, "tree:\n  include: sub.yaml\n")
+    lines = h.problems("tree:\n  include: sub.yaml\n")
     assert len(lines) == 1 and lines[0].startswith(f"{h.tmp / 'sub.yaml'}:4:8: recovery name 'x'"), lines
