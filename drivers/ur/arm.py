@@ -63,7 +63,7 @@ from mmexec.drivers.interfaces import (
 )
 from mmexec.drivers.ur import model as urmodel
 from mmexec.drivers.ur.rtde_client import RTDEClientError, RTDESession, probe
-from mmexec.drivers.ur.rtde_host import RTDEHost, call_all
+from mmexec.drivers.ur.rtde_host import QUIT_GRACE, RTDEHost, RTDEHostTimeout, call_all
 from mmexec.drivers.ur.states import ROBOT_MODES, RUNTIME_STATES, SAFETY_MODES, running_fault
 
 __all__ = [
@@ -245,7 +245,8 @@ class URArm(Arm):
     def _default_receive(self, host: str, frequency: float) -> Any:
         """Pre-flight RTDE handshake in Python, then ``RTDEReceiveInterface`` in the host
         process (worker thread; both within the connect deadline)."""
-        session = RTDESession(host, RTDE_PORT, self.config.connect_timeout, deadline=self._connect_deadline)
+        budget = self.config.connect_timeout
+        session = RTDESession(host, RTDE_PORT, budget, deadline=self._connect_deadline, deadline_text=f"{budget:.1f} s")
         with self._lock:
             self._preflight = session
         try:
@@ -271,11 +272,16 @@ class URArm(Arm):
                 fresh = True
             else:
                 fresh = False
-        if fresh:
-            rtde_host.start(self._connect_left())
-        return rtde_host.construct(module, cls, args, timeout=self._connect_left(),
-                                   call_timeout=self.config.command_timeout,
-                                   method_timeouts={"disconnect": self._disconnect_timeout})
+        try:
+            if fresh:
+                rtde_host.start(self._connect_left())
+            return rtde_host.construct(module, cls, args, timeout=self._connect_left(),
+                                       call_timeout=self.config.command_timeout,
+                                       method_timeouts={"disconnect": self._disconnect_timeout})
+        except RTDEHostTimeout as e:  # its deadline was what was left: name the whole budget
+            detail = (f"cannot connect: ur_rtde {e.what} did not return by the connect deadline "
+                      f"(connect_timeout {self.config.connect_timeout:.1f} s)")
+            raise URConnectionError(detail, detail) from None
 
     @property
     def _disconnect_timeout(self) -> float:
@@ -436,13 +442,15 @@ class URArm(Arm):
         """Stop the arm (servoStop, stopJ), disconnect both interfaces, end the host
         process, join the worker. A connect still in progress is abandoned at once.
 
-        Blocks at most ``timeout`` s (default ``3 * command_timeout + 2``: the two stop
-        calls and the disconnects, each with its deadline, and the host's exit)."""
+        Blocks at most ``timeout`` s (default: the two stop calls and the two disconnects,
+        each with its deadline, the host's exit and 0.5 s, i.e. ``4 * command_timeout +
+        3.5``; about 1.2 s on a healthy link, ur_rtde's disconnect taking 0.5 s)."""
         self._abort_connect(None)
         self._post("close")
         t = self._thread
         if t is not None:
-            t.join(timeout if timeout is not None else 3 * self.config.command_timeout + 2.0)
+            budget = 4 * self.config.command_timeout + 2 * DISCONNECT_ALLOWANCE + QUIT_GRACE + 0.5
+            t.join(timeout if timeout is not None else budget)
             if t.is_alive():
                 log.warning("UR %s: worker still inside a ur_rtde call after close(); left as daemon", self.config.host)
         self._thread = None
@@ -534,14 +542,15 @@ class URArm(Arm):
 
     # ------------------------------------------------------------------ worker
     def _call(self, name: str, fn: Callable[..., Any], *args: Any, timeout: float | None = None,
-              grace: float = 0.0) -> Any:
+              grace: float = 0.0, shown: float | None = None) -> Any:
         """Run one ur_rtde call with a deadline the tick side watches (worker thread only).
 
         ``grace`` [s]: the tick side waits this much longer, for a call that bounds
-        itself by ``timeout`` and then names its own, more precise reason."""
+        itself by ``timeout`` and then names its own, more precise reason. ``shown`` [s]:
+        the deadline the overrun message names (default ``timeout``)."""
         t = timeout if timeout is not None else self.config.command_timeout
         with self._lock:
-            self._inflight = (name, time.monotonic() + t + grace, t)
+            self._inflight = (name, time.monotonic() + t + grace, t if shown is None else shown)
         try:
             result = fn(*args)
         finally:
@@ -615,7 +624,8 @@ class URArm(Arm):
         if left <= 0:
             detail = f"no answer within {self.config.connect_timeout:.1f} s (before {name})"
             raise URConnectionError(detail, detail)
-        return self._call(name, factory, self.config.host, self.config.frequency, timeout=left, grace=_REASON_GRACE)
+        return self._call(name, factory, self.config.host, self.config.frequency, timeout=left,
+                          grace=_REASON_GRACE, shown=self.config.connect_timeout)
 
     def _connect(self, goal: Goal) -> None:
         host = self.config.host

@@ -39,7 +39,7 @@ Not judged: the runtime state (ur_rtde's control interface uploads and starts it
 control script, so a stopped program is the normal state before a run; once the driver
 runs, anything but "playing" is a fault it reports) and remote control (PolyScope 5.6
 and later refuse the control script in local mode; that is read from the dashboard
-server, whose protocol hardware-protocols.md does not describe, so the run's bring-up
+server, whose protocol docs/protocols.md does not describe, so the run's bring-up
 reports it: ur_rtde's "Please enable remote control on the robot!" in one line).
 """
 

@@ -161,7 +161,7 @@ class FakeURController:
 
     def set_state(self, *, robot_mode: int | None = None, safety_mode: int | None = None,
                   runtime_state: int | None = None) -> None:
-        """Any controller state by the vendor's numbers (hardware-protocols.md 4.2), e.g.
+        """Any controller state by the vendor's numbers (docs/protocols.md 4.2), e.g.
         power off ``robot_mode=3``, brakes engaged ``robot_mode=5``, safeguard stop
         ``safety_mode=5``; the safety status bits follow. A state in which the arm cannot
         move halts it. ValueError for a number the vendor does not define."""

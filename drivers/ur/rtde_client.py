@@ -1,7 +1,7 @@
 """A small RTDE client in pure Python: our codec over a socket, a deadline on every read.
 
 It runs where ur_rtde cannot be trusted to return: ur_rtde 1.6.5's constructors hold the
-GIL with no deadline of their own (hardware-protocols.md 4.3), so before any of them is
+GIL with no deadline of their own (docs/protocols.md 4.3), so before any of them is
 called the arm adapter checks here that the controller answers the RTDE handshake
 within ``connect_timeout`` (:func:`probe`), and ``mmexec hw ping ur`` reads the
 controller's state and link quality with it (:class:`RTDESession`, :func:`link_quality`).
@@ -111,13 +111,18 @@ def link_quality(stamps: Sequence[float], arrivals: Sequence[float], period: flo
 class RTDESession:
     """One RTDE connection driven step by step; every answer is awaited at most
     ``timeout`` seconds, and never past ``deadline`` (``time.monotonic()``) if given.
+    A wait the deadline ended is reported as ``no answer within DEADLINE_TEXT`` when
+    ``deadline_text`` is given (e.g. "5.0 s", the budget the deadline came from), with
+    the time that was left otherwise.
 
     No I/O in ``__init__``. :meth:`abort` (from any thread) ends a wait at once."""
 
-    def __init__(self, host: str, port: int, timeout: float, *, deadline: float | None = None) -> None:
+    def __init__(self, host: str, port: int, timeout: float, *, deadline: float | None = None,
+                 deadline_text: str = "") -> None:
         if not (math.isfinite(timeout) and timeout > 0):
             raise ValueError(f"timeout must be a number of seconds > 0, got {timeout}")
         self.host, self.port, self.timeout, self.deadline = host, port, timeout, deadline
+        self.deadline_text = deadline_text
         self.where = f"{host}:{port}"
         self._sock: socket.socket | None = None
         self._buf = b""
@@ -206,7 +211,7 @@ class RTDESession:
             return step
         left = self.deadline - time.monotonic()
         if left <= 0:
-            raise RTDEClientError(self.where, "no answer within the deadline")
+            raise RTDEClientError(self.where, f"no answer within {self.deadline_text or 'the deadline'}")
         return min(step, left)
 
     def _decode(self, fn: Any, *args: Any) -> Any:
@@ -229,6 +234,7 @@ class RTDESession:
         assert self._sock is not None, "open() first"
         wait = self._left(self.timeout)
         end = time.monotonic() + wait
+        within = self.deadline_text if self.deadline_text and wait < self.timeout else f"{wait:.1f} s"
         while True:
             try:
                 packages, rest = codec.split_packages(self._buf, strict=True)
@@ -245,7 +251,7 @@ class RTDESession:
             if left <= 0:
                 got = f"; {len(self._buf)} bytes of an incomplete package" if self._buf else ""
                 said = f"; controller said: {self.messages[-1].message}" if self.messages else ""
-                raise RTDEClientError(self.where, f"no answer within {wait:.1f} s (waiting for '{chr(expect)}'{got}{said})")
+                raise RTDEClientError(self.where, f"no answer within {within} (waiting for '{chr(expect)}'{got}{said})")
             self._sock.settimeout(left)
             try:
                 chunk = self._sock.recv(65536)

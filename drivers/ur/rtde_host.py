@@ -1,6 +1,6 @@
 """ur_rtde in a child process: the interfaces live there, the parent calls them with deadlines.
 
-Why a process (hardware-protocols.md 4.3, and measured with ur_rtde 1.6.5): the
+Why a process (docs/protocols.md 4.3, and measured with ur_rtde 1.6.5): the
 constructors of ``RTDEReceiveInterface`` / ``RTDEControlInterface`` hold the Python GIL
 while they wait for the controller, with no deadline of their own. A controller that
 accepts the TCP connection and then never answers, or answers bytes that are not RTDE,
@@ -43,7 +43,16 @@ from collections.abc import Callable, Mapping, Sequence
 from multiprocessing.connection import Connection
 from typing import IO, Any
 
-__all__ = ["VENDOR_CLASSES", "RTDEHost", "RTDEHostError", "RemoteInterface", "call_all", "main"]
+__all__ = [
+    "QUIT_GRACE",
+    "VENDOR_CLASSES",
+    "RTDEHost",
+    "RTDEHostError",
+    "RTDEHostTimeout",
+    "RemoteInterface",
+    "call_all",
+    "main",
+]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +70,14 @@ _PASS_THROUGH = (RuntimeError, TypeError, ValueError, AttributeError, IndexError
 
 class RTDEHostError(RuntimeError):
     """The ur_rtde host process could not start, overran a deadline (and was killed), or is gone."""
+
+
+class RTDEHostTimeout(RTDEHostError):
+    """A call overran its deadline; the host was killed. ``what`` names the call."""
+
+    def __init__(self, message: str, what: str) -> None:
+        super().__init__(message)
+        self.what = what
 
 
 class RTDEHost:
@@ -184,6 +201,8 @@ class RTDEHost:
                 if self._dead and self._dead != "closed":
                     reason = f"ur_rtde {what}: {self._dead}"
                 self.kill(reason)
+                if not ready:
+                    raise RTDEHostTimeout(reason, what)
                 raise RTDEHostError(reason)
         status, value, *rest = reply
         if status == "ok":

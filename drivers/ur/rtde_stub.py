@@ -69,7 +69,7 @@ _MAX_BACKLOG = 5.0  # s of owed samples the stub still sends after falling behin
 #: what a request is answered with while ``garbage`` is on (a text service's greeting)
 GARBAGE = b"Connected: this is not an RTDE server\n"
 
-#: the named fault commands as vendor state numbers (hardware-protocols.md 4.2, 4.6)
+#: the named fault commands as vendor state numbers (docs/protocols.md 4.2, 4.6)
 _NAMED_STATES: dict[str, dict[str, int]] = {
     "protective_stop": {"safety_mode": 3},
     "emergency_stop": {"safety_mode": 7, "robot_mode": 3},  # robot e-stop cuts arm power
@@ -576,7 +576,7 @@ class RTDEStub:
     def set_state(self, *, robot_mode: int | None = None, safety_mode: int | None = None,
                   runtime_state: int | None = None) -> None:
         """Robot mode, safety mode and/or runtime state by the vendor's numbers
-        (hardware-protocols.md 4.2); both status bit fields follow. E.g. power off:
+        (docs/protocols.md 4.2); both status bit fields follow. E.g. power off:
         ``robot_mode=3``; brakes engaged: ``robot_mode=5``; safeguard stop: ``safety_mode=5``."""
         given = {"robot_mode": robot_mode, "safety_mode": safety_mode, "runtime_state": runtime_state}
         self.command("state", **{k: v for k, v in given.items() if v is not None})

@@ -1,4 +1,4 @@
-"""UR controller state codes (hardware-protocols.md 4.2) and what they mean for mmexec.
+"""UR controller state codes (ur_rtde 1.6.5 docstrings, docs/protocols.md 4.2) and their meaning.
 
 Pure data and functions, no imports beyond the standard library, so the RTDE stub
 process, the ping and the arm adapter share one copy of the vendor's numbering:

@@ -145,7 +145,8 @@ KINDS = ["silent", "garbage", "stalls ur_rtde"]
 REASONS = {
     "silent": "no answer within 1.0 s (waiting for 'V')",
     "garbage": "corrupt RTDE reply (unknown package type 32 (0x20) at offset 0): not an RTDE server?",
-    "stalls ur_rtde": "cannot connect: ur_rtde RTDEReceiveInterface() did not return within",
+    "stalls ur_rtde": ("cannot connect: ur_rtde RTDEReceiveInterface() did not return by the connect deadline "
+                       "(connect_timeout 1.0 s)"),
 }
 
 
@@ -159,7 +160,7 @@ def test_bring_up_fails_in_one_line_naming_host_and_port(tmp_path: Path, kind: s
             assert host_processes(proc.pid) == []
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
-    assert lines[0].startswith(f"{config}:4:8: robot.arm: UR {host}:30004: {REASONS[kind]}"), lines[0]
+    assert lines[0] == f"{config}:4:8: robot.arm: UR {host}:30004: {REASONS[kind]}"
     run_end = read_log(log)[-1]
     assert (run_end["event"], run_end["exit_code"]) == ("run_end", 2)
 
