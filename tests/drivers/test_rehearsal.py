@@ -108,7 +108,7 @@ def test_ur(capsys: pytest.CaptureFixture[str]) -> None:
         rc, out, err = ping(capsys, "ur", "--host", host)
         assert rc == 0 and out.startswith(f"ur {host}:30004: controller ") and err == ""
     rc, out, err = ping(capsys, "ur", "--host", host, "--timeout", "0.5")  # the fake is gone
-    assert rc == 1 and out == "" and "\n" not in err and err.startswith(f"ur {host}:30004: ")
+    assert rc == 2 and out == "" and "\n" not in err and err.startswith(f"ur {host}:30004: ")  # cannot open
 
 
 def test_ping_into_a_closed_pipe_exits_quietly() -> None:
