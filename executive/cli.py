@@ -513,7 +513,8 @@ def _cmd_run(args: argparse.Namespace, argv: Sequence[str]) -> int:
 def _cmd_serve(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``mmexec serve``: see :mod:`mmexec.executive.serve.server` and docs/console.md."""
     try:
-        from mmexec.executive.serve.server import ServeRunner, serve
+        from mmexec.executive.serve.server import serve
+        from mmexec.executive.serve.service import ServeRunner
     except ModuleNotFoundError as e:
         if e.name not in ("fastapi", "uvicorn", "starlette", "pydantic"):
             raise

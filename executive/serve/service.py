@@ -518,7 +518,8 @@ class ServeRunner(Runner):
     # tick thread: between ticks of a request, and while idle
     def _between_ticks(self, robot: Robot, period: float) -> None:
         self._apply_commands()
-        self.service.prompts.pace(robot, period)
+        if not self.interrupted:  # a signalled halt is not held back for the operator
+            self.service.prompts.pace(robot, period)
         self.service.set_state("running", t=robot.clock.now())
         self._publish(robot)
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,24 @@ def mock_config(tmp_path: Path, serve_section: str) -> Path:
     return path
 
 
+class Console(io.TextIOBase):
+    """The run's console for tests: keeps the last lines only (a long run's output must
+    not look like the service's memory growing)."""
+
+    def __init__(self, keep: int = 500) -> None:
+        self.lines: deque[str] = deque(maxlen=keep)
+
+    def write(self, text: str) -> int:
+        self.lines.extend(text.splitlines())
+        return len(text)
+
+    def isatty(self) -> bool:
+        return False
+
+    def getvalue(self) -> str:
+        return "\n".join(self.lines)
+
+
 class Live:
     """A started service; ``client`` talks to its API, :meth:`close` stops it."""
 
@@ -39,7 +58,7 @@ class Live:
                  params: dict[str, Any] | None = None) -> None:
         self.log_path = log_path
         self.service = Service()
-        self.out = io.StringIO()
+        self.out = Console()
         self.runner = ServeRunner(RunOptions(mission=mission, config=config, log_path=log_path,
                                              params=dict(params or {})), self.service, out=self.out, err=self.out)
         self.runner.prepare()
