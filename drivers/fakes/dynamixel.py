@@ -39,7 +39,8 @@ Fault switches (attributes or methods on :class:`FakeDxlBus`):
   is; torque stays on), the register reads -1 and goal writes answer data range error
   until 0 is written to it. The motion model runs up to the moment it fired, so the
   position shows how far the servo went after the host fell silent; the fake's own tick
-  (every 10 ms) and :meth:`FakeDxlBus.register` advance it without any traffic.
+  (every 20 ms, servos with an armed watchdog) and :meth:`FakeDxlBus.register` advance it
+  without any traffic.
   :meth:`FakeDxlBus.expire_watchdog` fires it at once. Which packets refresh it: the
   e-Manual counts "all the Instruction Packet"; whether one addressed to other ids counts is
   unconfirmed, so the fake takes the stricter reading: only a packet that addresses the
@@ -446,8 +447,9 @@ def wx250s_servos(
 class FakeDxlBus(PtyDevice):
     """A multidrop bus of :class:`FakeServo` on a pty (see the module docstring)."""
 
-    #: the servos run (motion, Bus Watchdog) on this tick too, not only when packets arrive
-    tick_period = 0.01
+    #: a servo with an armed Bus Watchdog also runs on this tick (one watchdog unit), not only
+    #: when packets arrive, so it fires with no traffic at all
+    tick_period = 0.02
 
     def __init__(
         self,
@@ -523,7 +525,8 @@ class FakeDxlBus(PtyDevice):
     def on_tick(self, now: float) -> None:
         with self._mlock:
             for s in self.servos:
-                s.update(now)
+                if s.get("bus_watchdog") > 0:
+                    s.update(now)
 
     def on_bytes(self, data: bytes) -> None:
         with self._mlock:
