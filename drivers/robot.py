@@ -290,6 +290,7 @@ def _wx250s(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
     mod = _import("mmexec.drivers.dynamixel.wx250s", "kind 'wx250s'", section.value_mark("kind"), path)
     cfg = bind(mod.WX250sConfig, _without(section, "kind"), section.mark, path, ctx.problems)
     if cfg is None:
+        ctx.devices["arm"] = None  # a wx250s arm whose section has problems (reported)
         return None
     bus_mod = _import("mmexec.drivers.dynamixel.bus", "kind 'wx250s'", section.value_mark("kind"), path)
     device = mod.WX250s(cfg, clock=ctx.robot.clock)
@@ -317,6 +318,8 @@ def _wx250s_gripper(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
         return None
     mod = _import("mmexec.drivers.dynamixel.wx250s", "kind 'wx250s_gripper'", section.value_mark("kind"), path)
     device = ctx.devices["arm"]
+    if device is None:
+        return None  # the arm section's problems are reported there
     return ("gripper", "wx250s gripper", section.mark, lambda: mod.WX250sGripper(device))
 
 
