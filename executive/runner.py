@@ -353,6 +353,11 @@ class Runner:
         """How many requests the run serves (``of`` in ``request_start``); None: open-ended."""
         return len(self._requests)
 
+    def _request_tags(self, index: int) -> dict[str, Any]:
+        """More fields for request ``index``'s ``request_start`` and ``request_end`` records
+        (a service adds the request's ``id``). Here: none."""
+        return {}
+
     def _end_queue(self) -> None:
         """Called once after the last request, before ``run_end`` (a service drops what is
         still queued). Here: nothing."""
@@ -627,8 +632,8 @@ class Runner:
                 self._halt_request = ""  # a halt asked for between requests concerns none
         tree = self.mission.instantiate(ctx, request, params=opts.params or None)
         t0 = robot.clock.now()
-        elog.write("request_start", index=index, of=total, request=request, mission_sha256=self.mission.sha256,
-                   nodes=[path for path, _ in tree.snapshot()])
+        elog.write("request_start", index=index, of=total, **self._request_tags(index), request=request,
+                   mission_sha256=self.mission.sha256, nodes=[path for path, _ in tree.snapshot()])
 
         def on_status(path: str, old: Any, new: Any) -> None:
             elog.write("node_status", path=path, old=old, new=new)
@@ -728,7 +733,8 @@ class Runner:
 
     def _end(self, r: RequestResult) -> None:
         assert self.log is not None
-        self.log.write("request_end", index=r.index, request=r.request, outcome=r.outcome, duration=r.duration,
+        self.log.write("request_end", index=r.index, **self._request_tags(r.index), request=r.request,
+                       outcome=r.outcome, duration=r.duration,
                        recoveries=r.recoveries, skill_failures=r.skill_failures, reason=r.reason,
                        failure_kind=r.failure_kind, failure_node=r.failure_node)
 

@@ -16,8 +16,9 @@ and writes the event log; the log stays the canonical record and is written exac
 ``stop``                reason: the API asked the service to stop
 ======================  ===================================================================
 
-A served request's ``request_start`` / ``request_end`` ``index`` is its id, so every
-accepted request ends in exactly one ``request_end`` or ``request_dropped``.
+A served request's ``request_start`` / ``request_end`` carry its ``id`` (``index`` counts
+the requests served, 1, 2, ..., as in a ``run`` log), so every accepted request ends in
+exactly one ``request_end`` or ``request_dropped``.
 
 Streams (:class:`Hub`): every event-log record, tree snapshots, status, robot pose, path,
 map, scan, camera frames (JPEG, rate-limited) and operator prompts, each a JSON message
@@ -184,7 +185,7 @@ class TreeView:
         """Take one record; returns whether the tree changed."""
         ev = record.get("event")
         if ev == "request_start":
-            self.request = record.get("index")
+            self.request = record.get("id", record.get("index"))
             self.order = [str(p) for p in record.get("nodes", [])]
             self.status = dict.fromkeys(self.order, "INVALID")
             self.changed = set(self.order)
@@ -445,6 +446,7 @@ class ServeRunner(Runner):
         self._due: dict[str, float] = {}
         self._last_path: Any = None
         self._period = 0.05
+        self._request_id = 0  # the service id of the request being served
         self.add_log_listener(self._on_record)
         self.add_tick_hook(self._between_ticks)
 
@@ -467,6 +469,9 @@ class ServeRunner(Runner):
     def _total(self) -> int | None:
         return None
 
+    def _request_tags(self, index: int) -> dict[str, Any]:
+        return {"id": self._request_id}
+
     def _next_request(self, served: int) -> tuple[int, dict[str, Any]] | None:
         assert self.robot is not None and self.log is not None
         svc = self.service
@@ -479,7 +484,8 @@ class ServeRunner(Runner):
             req = svc.take()
             if req is not None:
                 self._apply_commands()  # its request_queued record comes before request_start
-                return req.id, req.fields
+                self._request_id = req.id
+                return served + 1, req.fields
             svc.set_state("idle", t=self.robot.clock.now(), tip="")
             self._publish(self.robot)
             if self.robot.clock.stepped:

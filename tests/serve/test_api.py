@@ -47,7 +47,8 @@ def test_submit_and_serve_writes_the_log_as_run_does(live: Any) -> None:
     assert events.index("request_queued") < events.index("request_start") < events.index("request_end")
     assert "node_status" in events and "report" in events
     end = svc.records("request_end")[0]
-    assert end["index"] == body["id"] and end["outcome"] == "success"
+    assert end["id"] == body["id"] and end["index"] == 1 and end["outcome"] == "success"
+    assert svc.records("request_start")[0]["id"] == body["id"]
     assert svc.records("run_end")[0]["outcome"] == "stopped"
     assert "request 1 (item=3): success" in svc.out.getvalue()
 
@@ -107,7 +108,7 @@ def test_queue_pause_cancel_resume(live: Any) -> None:
     assert [r["id"] for r in svc.records("request_queued")] == ids
     dropped = svc.records("request_dropped")
     assert [(d["id"], d["reason"]) for d in dropped] == [(ids[1], "cancelled through the API")]
-    assert [r["index"] for r in svc.records("request_end")] == [ids[0], ids[2]]
+    assert [(r["index"], r["id"]) for r in svc.records("request_end")] == [(1, ids[0]), (2, ids[2])]
     assert [r["event"] for r in svc.records() if r["event"] in ("paused", "resumed")] == ["paused", "resumed"]
 
 
@@ -151,7 +152,7 @@ def test_stop_drops_the_queue_and_refuses_new_requests(live: Any) -> None:
     assert c.get("/api/status").json()["state"] == "stopped"
     assert svc.service.get(first).state == "cancelled"
     ends = svc.records("request_end")
-    assert [(e["index"], e["outcome"], e["reason"]) for e in ends] == [(first, "cancelled", "the service was stopped")]
+    assert [(e["id"], e["outcome"], e["reason"]) for e in ends] == [(first, "cancelled", "the service was stopped")]
     assert [(d["id"], d["reason"]) for d in svc.records("request_dropped")] == [(queued, "the service stopped")]
     run_end = svc.records("run_end")[0]
     assert run_end["outcome"] == "stopped" and run_end["exit_code"] == 0 and run_end["served"] == 1

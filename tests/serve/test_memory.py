@@ -1,12 +1,19 @@
 """1000 requests through the API on the mock backend: memory does not grow (tracemalloc,
 at most 10 % over the level after a warm-up) and every request is accounted for in the
-event log (queued once, ended once, in order, all successful)."""
+event log (queued once, ended once, in order, all successful).
+
+The service runs in a fresh interpreter that starts tracemalloc before importing
+anything, so the level measured is the whole service's (the executive, FastAPI, the
+mission, the robot), not whatever an earlier test in the session left unallocated.
+"""
 
 from __future__ import annotations
 
-import gc
+import json
+import subprocess
+import sys
 import tracemalloc
-from collections import deque
+from pathlib import Path
 from typing import Any
 
 WARMUP = 200
@@ -24,31 +31,52 @@ def _serve_batches(svc: Any, first_item: int, count: int) -> None:
         svc.finished(last)
 
 
-def test_thousand_requests_no_growth_all_logged(live: Any) -> None:
+def _worker(folder: Path) -> dict[str, Any]:
+    """In the fresh interpreter: serve WARMUP then REQUESTS requests; the traced memory
+    after each, the exit code and the log's path."""
+    import gc
+    from collections import deque
+
     tracemalloc.start()
-    try:
-        svc = live("quick")
-        svc.out.lines = deque(svc.out.lines, maxlen=50)  # the console's tail fills during the warm-up
-        _serve_batches(svc, 0, WARMUP)
-        gc.collect()
-        baseline = tracemalloc.get_traced_memory()[0]
-        _serve_batches(svc, WARMUP, REQUESTS)
-        gc.collect()
-        after = tracemalloc.get_traced_memory()[0]
-    finally:
-        tracemalloc.stop()
-    print(f"traced memory after warm-up {baseline} bytes, after {REQUESTS} more requests {after} bytes")
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from conftest import MISSIONS, MOCK, Live
+
+    svc = Live(MISSIONS / "quick.yaml", MOCK, folder / "events.jsonl")
+    svc.out.lines = deque(maxlen=50)  # the console's tail: bounded, filled during the warm-up
+    _serve_batches(svc, 0, WARMUP)
+    gc.collect()
+    baseline = tracemalloc.get_traced_memory()[0]
+    _serve_batches(svc, WARMUP, REQUESTS)
+    gc.collect()
+    after = tracemalloc.get_traced_memory()[0]
+    counts = svc.service.status()["counts"]
+    code = svc.close()
+    return {"baseline": baseline, "after": after, "code": code, "counts": counts, "log": str(svc.log_path)}
+
+
+def test_thousand_requests_no_growth_all_logged(tmp_path: Path) -> None:
+    from mmexec.executive.eventlog import read_log
+
+    r = subprocess.run([sys.executable, __file__, str(tmp_path)], capture_output=True, text=True, timeout=900,
+                       check=False)
+    assert r.returncode == 0, r.stderr
+    data = json.loads(r.stdout.strip().splitlines()[-1])
+    baseline, after = data["baseline"], data["after"]
     assert after <= baseline * 1.10, f"traced memory grew from {baseline} to {after} bytes"
-    assert svc.close() == 0
-    every = list(range(1, WARMUP + REQUESTS + 1))
-    queued = svc.records("request_queued")
-    ends = svc.records("request_end")
-    assert [r["id"] for r in queued] == every
-    assert [r["index"] for r in ends] == every
+    assert data["code"] == 0
+    total = WARMUP + REQUESTS
+    assert data["counts"] == {"accepted": total, "served": total, "succeeded": total, "failed": 0, "dropped": 0}
+    records = read_log(data["log"])
+    every = list(range(1, total + 1))
+    assert [r["id"] for r in records if r["event"] == "request_queued"] == every
+    ends = [r for r in records if r["event"] == "request_end"]
+    assert [r["id"] for r in ends] == [r["index"] for r in ends] == every
     assert {r["outcome"] for r in ends} == {"success"}
-    assert [r["request"]["item"] for r in ends] == list(range(WARMUP + REQUESTS))
-    assert svc.records("request_dropped") == []
-    run_end = svc.records("run_end")[0]
-    assert run_end["served"] == run_end["succeeded"] == WARMUP + REQUESTS
-    status = svc.service.status()["counts"]
-    assert status == {"accepted": 1200, "served": 1200, "succeeded": 1200, "failed": 0, "dropped": 0}
+    assert [r["request"]["item"] for r in ends] == list(range(total))
+    assert not [r for r in records if r["event"] == "request_dropped"]
+    run_end = records[-1]
+    assert run_end["event"] == "run_end" and run_end["served"] == run_end["succeeded"] == total
+
+
+if __name__ == "__main__":
+    print(json.dumps(_worker(Path(sys.argv[1]))))

@@ -100,7 +100,7 @@ def test_sigterm_halts_the_tree_and_ends_the_log(tmp_path: Path, procs: list[Pro
     halt = next(r for r in recs if r["event"] == "halt")
     assert halt["reason"] == "interrupt" and halt["signal"] == "SIGTERM" and halt["index"] == first
     end = next(r for r in recs if r["event"] == "request_end")
-    assert end["index"] == first and end["outcome"] == "interrupted" and end["reason"] == "interrupted (SIGTERM)"
+    assert end["id"] == first and end["outcome"] == "interrupted" and end["reason"] == "interrupted (SIGTERM)"
     dropped = [r for r in recs if r["event"] == "request_dropped"]
     assert [(d["id"], d["reason"]) for d in dropped] == [(second, "the service was interrupted")]
     assert recs[-1]["event"] == "run_end" and recs[-1]["outcome"] == "interrupted" and recs[-1]["exit_code"] == 143
