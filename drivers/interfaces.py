@@ -29,6 +29,8 @@ from typing import Any, Self
 
 import numpy as np
 
+from mmexec.drivers.geometry import planar_transform
+
 __all__ = [
     "BLIND_FAULTS",
     "Arm",
@@ -248,10 +250,7 @@ class Pose2D:
 
     def matrix(self) -> np.ndarray:
         """4x4 transform of this pose (``T_parent_self``), z = 0."""
-        c, s = math.cos(self.theta), math.sin(self.theta)
-        return np.array(
-            [[c, -s, 0.0, self.x], [s, c, 0.0, self.y], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
-        )
+        return planar_transform(self.x, self.y, self.theta)
 
     def distance_to(self, other: Pose2D) -> float:
         return math.hypot(other.x - self.x, other.y - self.y)

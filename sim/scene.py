@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
+from mmexec.drivers.geometry import matrix_to_quat
 from mmexec.sim.markers import QUIET_RATIO, marker_texture_path
 from mmexec.sim.world import World
 
@@ -65,20 +66,8 @@ class SceneHandles:
 
 def quat_of(T: np.ndarray) -> tuple[float, float, float, float]:
     """(x, y, z, w) quaternion of the rotation part of a 4x4 transform."""
-    R = T[:3, :3]
-    tr = R[0, 0] + R[1, 1] + R[2, 2]
-    if tr > 0:
-        s = math.sqrt(tr + 1.0) * 2
-        return ((R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s)
-    i = int(np.argmax([R[0, 0], R[1, 1], R[2, 2]]))
-    j, k = (i + 1) % 3, (i + 2) % 3
-    s = math.sqrt(1.0 + R[i, i] - R[j, j] - R[k, k]) * 2
-    q = [0.0, 0.0, 0.0, 0.0]
-    q[i] = 0.25 * s
-    q[j] = (R[j, i] + R[i, j]) / s
-    q[k] = (R[k, i] + R[i, k]) / s
-    q[3] = (R[k, j] - R[j, k]) / s
-    return (q[0], q[1], q[2], q[3])
+    x, y, z, w = (float(v) for v in matrix_to_quat(T[:3, :3]))
+    return (x, y, z, w)
 
 
 def yaw_of(T: np.ndarray) -> float:

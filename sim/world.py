@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 
 from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, did_you_mean, load_yaml
+from mmexec.drivers.geometry import planar_transform, wrap_angle
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, SceneBox
 
 __all__ = [
@@ -230,16 +231,9 @@ class WorldSpec:
     description: str = ""
 
 
-def _rot(yaw: float) -> np.ndarray:
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def _T(x: float, y: float, z: float, yaw: float) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = _rot(yaw)
-    T[:3, 3] = (x, y, z)
-    return T
+    """4x4 pose at (x, y, z) [m] turned ``yaw`` [rad] about z."""
+    return planar_transform(x, y, yaw, z)
 
 
 @dataclass(frozen=True)
@@ -410,16 +404,12 @@ def load_world(
     ) + tuple(extra_obstacles)
     sx, sy, syaw = spec.start
     start = Pose2D(sx + rng.uniform(-rz.start_xy, rz.start_xy), sy + rng.uniform(-rz.start_xy, rz.start_xy),
-                   _wrap(syaw + rng.uniform(-rz.start_yaw, rz.start_yaw)))
+                   wrap_angle(syaw + rng.uniform(-rz.start_yaw, rz.start_yaw)))
     return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start)
 
 
 def mark_of_raw(raw: Any, default: Mark) -> Mark:
     return getattr(raw, "mark", default)
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
 
 
 def _list_marks(raw: YDict, key: str) -> list[Mark]:

@@ -34,6 +34,7 @@ from mmexec.config.yamlload import (
     load_yaml,
     mark_of,
 )
+from mmexec.drivers.geometry import xyz_rpy_transform
 from mmexec.drivers.interfaces import CameraIntrinsics
 
 __all__ = ["CameraConfig", "IntrinsicsConfig", "MountConfig", "load_camera_config"]
@@ -59,15 +60,7 @@ class MountConfig:
 
     def matrix(self) -> np.ndarray:
         """``T_base_camera`` (4x4)."""
-        r, p, y = self.rpy
-        cr, sr, cp, sp, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
-                                  math.cos(y), math.sin(y))
-        T = np.eye(4)
-        T[:3, :3] = [[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]]
-        T[:3, 3] = self.xyz
-        return T
+        return xyz_rpy_transform(self.xyz, self.rpy)
 
 
 @dataclass(frozen=True)

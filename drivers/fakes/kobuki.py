@@ -57,6 +57,7 @@ from pathlib import Path
 from typing import Self
 
 from mmexec.drivers.fakes.pty import PtyDevice
+from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.kobuki import codec as k
 
 __all__ = ["SAFETY_BITS", "FakeKobukiState", "KobukiFake"]
@@ -370,7 +371,7 @@ class KobukiFake(PtyDevice):
         mid = s.heading + w * dt / 2.0
         s.x += v * dt * math.cos(mid)
         s.y += v * dt * math.sin(mid)
-        s.heading = math.atan2(math.sin(s.heading + w * dt), math.cos(s.heading + w * dt))
+        s.heading = wrap_angle(s.heading + w * dt)
         s.timestamp_ms = (s.timestamp_ms + round(dt * 1000)) & 0xFFFF
         pwm = max(-127, min(127, round(left / 7.0))), max(-127, min(127, round(right / 7.0)))
         core = k.CoreSensors(

@@ -30,6 +30,8 @@ import struct
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+from mmexec.drivers.geometry import wrap_angle
+
 __all__ = [
     "BASE_CONTROL",
     "BIAS",
@@ -415,10 +417,6 @@ _FIXED_LEN = {
 }
 
 
-def _wrap_angle(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
-
-
 def decode_feedback(payload: bytes) -> Feedback:
     """Decode every sub-payload of a feedback frame (see :class:`Feedback`).
 
@@ -438,7 +436,7 @@ def decode_feedback(payload: bytes) -> Feedback:
             fields["dock_ir"] = DockInfrared(d[0], d[1], d[2])
         elif sub_id == INERTIA:
             angle, rate = struct.unpack_from("<hh", d)
-            fields["inertia"] = Inertia(_wrap_angle(math.radians(angle / 100.0)), math.radians(rate / 100.0))
+            fields["inertia"] = Inertia(wrap_angle(math.radians(angle / 100.0)), math.radians(rate / 100.0))
         elif sub_id == CLIFF:
             fields["cliff"] = CliffSensors(*struct.unpack("<HHH", d))
         elif sub_id == CURRENT:
@@ -509,7 +507,7 @@ def _clamp16(x: float) -> int:
 
 def encode_inertia(heading: float, rate: float) -> bytes:
     """Sub-payload id 4 from ``heading`` [rad] and ``rate`` [rad/s]."""
-    h = _clamp16(math.degrees(_wrap_angle(heading)) * 100.0)
+    h = _clamp16(math.degrees(wrap_angle(heading)) * 100.0)
     r = _clamp16(math.degrees(rate) * 100.0)
     return subpayload(INERTIA, struct.pack("<hh", h, r) + b"\x00\x00\x00")
 
@@ -746,11 +744,11 @@ class Odometry:
         dt = ((timestamp_ms - last[2]) & 0xFFFF) / 1000.0
         ds = (dl + dr) / 2.0
         if heading is not None and self._gyro0 is not None:
-            new_theta = _wrap_angle(self._theta0 + heading - self._gyro0)
-            dth = _wrap_angle(new_theta - self.theta)
+            new_theta = wrap_angle(self._theta0 + heading - self._gyro0)
+            dth = wrap_angle(new_theta - self.theta)
         else:
             dth = (dr - dl) / BIAS
-            new_theta = _wrap_angle(self.theta + dth)
+            new_theta = wrap_angle(self.theta + dth)
         mid = self.theta + dth / 2.0
         self.x += ds * math.cos(mid)
         self.y += ds * math.sin(mid)

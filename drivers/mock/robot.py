@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import (
     Arm,
     Base,
@@ -73,10 +74,6 @@ DEFAULT_ARM_LIMITS: tuple[JointLimit, ...] = tuple(
         ("wrist_rotate", -math.pi, math.pi),
     )
 )
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _approach(value: float, target: float, max_step: float) -> float:
@@ -145,7 +142,7 @@ class MockBase(Base):
         self.pose = Pose2D(
             self.pose.x + self.v * dt * math.cos(th),
             self.pose.y + self.v * dt * math.sin(th),
-            _wrap(self.pose.theta + self.w * dt),
+            wrap_angle(self.pose.theta + self.w * dt),
         )
 
 

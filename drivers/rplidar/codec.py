@@ -25,6 +25,8 @@ import math
 import struct
 from dataclasses import dataclass
 
+from mmexec.drivers.geometry import wrap_angle
+
 __all__ = [
     "ACC_BOARD_MOTOR_CONTROL",
     "DEFAULT_MOTOR_PWM",
@@ -404,8 +406,7 @@ class MeasurementNode:
 def ccw_angle(angle_q6: int) -> float:
     """A device angle (clockwise, degrees * 64) as a counter-clockwise angle [rad] in
     [-pi, pi): the REP-103 convention of the lidar frame."""
-    a = -math.radians(angle_q6 / 64.0)
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
+    return wrap_angle(-math.radians(angle_q6 / 64.0))
 
 
 def node_is_valid(data: bytes) -> bool:

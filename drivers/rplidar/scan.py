@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.rplidar.codec import NODE_SIZE, MeasurementNode
 
 __all__ = [
@@ -207,8 +208,7 @@ def resample(nodes: Sequence[MeasurementNode], beams: int) -> tuple[np.ndarray, 
     if not nodes:
         return ranges, intensities
     q6 = np.array([n.angle_q6 for n in nodes], dtype=np.float64)
-    angle = -np.radians(q6 / 64.0)
-    angle = (angle + math.pi) % (2.0 * math.pi) - math.pi
+    angle = wrap_angle(-np.radians(q6 / 64.0))
     dist = np.array([n.distance_q2 for n in nodes], dtype=np.float64) / 4000.0
     dist[dist == 0.0] = np.inf
     quality = np.array([n.quality for n in nodes], dtype=np.float64) / 63.0

@@ -15,6 +15,7 @@ import math
 from collections.abc import Generator
 from typing import Any
 
+from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import Base, Pose2D
 from mmexec.skills.base import (
     FailureKind,
@@ -42,7 +43,6 @@ from mmexec.skills.navigation import (
     plan_path,
     simplify_path,
 )
-from mmexec.skills.navigation.tracker import wrap_angle
 from mmexec.skills.primitives import brake
 
 __all__ = ["approach", "back_off", "costmap", "drive_path", "navigate", "rotate_by"]

@@ -27,6 +27,7 @@ from itertools import pairwise
 
 import numpy as np
 
+from mmexec.drivers.geometry import matrix_to_quat, quat_to_matrix
 from mmexec.drivers.interfaces import JointLimit, JointTrajectory
 from mmexec.skills.manipulation.kinematics import ArmKinematics
 from mmexec.skills.manipulation.scene import PlanningScene
@@ -399,7 +400,6 @@ class ArmPlanner:
         jumps more than ``max_joint_step`` [rad] between waypoints, or a motion collides."""
         cfg = config or self.config
         t0 = time.perf_counter()
-        from mmexec.skills.perception.averaging import matrix_to_quat, quat_to_matrix
 
         q = np.asarray(q_start, dtype=float)
         if not self.scene.is_valid(q):

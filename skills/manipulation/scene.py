@@ -30,6 +30,7 @@ from typing import Self
 import numpy as np
 import pybullet as p
 
+from mmexec.drivers.geometry import matrix_to_quat, quat_to_matrix
 from mmexec.drivers.interfaces import SceneBox
 
 __all__ = ["ArmModel", "PlanningScene", "SceneItem", "pb_to_pose", "pose_to_pb"]
@@ -90,15 +91,11 @@ class SceneItem:
 
 def pose_to_pb(T: np.ndarray) -> tuple[list[float], list[float]]:
     """4x4 -> (position, quaternion xyzw) for pybullet."""
-    from mmexec.skills.perception.averaging import matrix_to_quat
-
     return [float(x) for x in T[:3, 3]], [float(x) for x in matrix_to_quat(T[:3, :3])]
 
 
 def pb_to_pose(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
     """(position, quaternion xyzw) -> 4x4."""
-    from mmexec.skills.perception.averaging import quat_to_matrix
-
     T = np.eye(4)
     T[:3, :3] = quat_to_matrix(quat)
     T[:3, 3] = pos

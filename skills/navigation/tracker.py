@@ -17,14 +17,10 @@ import itertools
 import math
 from dataclasses import dataclass
 
+from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import Pose2D
 
-__all__ = ["PathTracker", "TrackerConfig", "wrap_angle"]
-
-
-def wrap_angle(a: float) -> float:
-    """``a`` [rad] wrapped to (-pi, pi]."""
-    return math.atan2(math.sin(a), math.cos(a))
+__all__ = ["PathTracker", "TrackerConfig"]
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mmexec.drivers.geometry import rigid_fit
 from mmexec.skills.manipulation.grasp import tool_rotation_in_marker
 
 __all__ = [
@@ -61,7 +62,6 @@ __all__ = [
     "fit_panel",
     "press_path",
     "press_paths",
-    "rigid_fit",
 ]
 
 log = logging.getLogger(__name__)
@@ -140,18 +140,6 @@ class PanelFit:
     def normal(self) -> np.ndarray:
         """Unit normal of the panel face (out of it, towards the robot), in the frame."""
         return self.T_frame_panel[:3, 2].copy()
-
-
-def rigid_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation ``R`` (k x k, det +1, never a reflection) and translation ``t`` minimising
-    ``sum |R src_i + t - dst_i|^2`` (Kabsch / Umeyama without scale); ``src`` and ``dst``
-    (N, k) with k = 2 or 3 and N >= k."""
-    cs, cd = src.mean(axis=0), dst.mean(axis=0)
-    u, _, vt = np.linalg.svd((src - cs).T @ (dst - cd))
-    D = np.eye(src.shape[1])
-    D[-1, -1] = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    R = vt.T @ D @ u.T
-    return R, cd - R @ cs
 
 
 def _spans_plane(pts: np.ndarray, min_span: float = 1e-6) -> bool:

@@ -12,13 +12,13 @@ printed, z out of the face towards the camera).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from mmexec.drivers.geometry import rot_x, rot_y, rot_z
 from mmexec.drivers.interfaces import CameraIntrinsics
 
 __all__ = ["SyntheticView", "look_at_marker", "render_marker_view", "render_markers_view"]
@@ -41,26 +41,11 @@ def look_at_marker(distance: float, yaw: float = 0.0, pitch: float = 0.0, roll: 
     ``roll`` (about its z) [rad], shifted by ``offset`` (x right, y down) [m]."""
     # head-on: marker z towards the camera (-z_cam), marker y up (-y_cam), x right (x_cam)
     R0 = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
-    R = R0 @ _rot_y(yaw) @ _rot_x(pitch) @ _rot_z(roll)
+    R = R0 @ rot_y(yaw) @ rot_x(pitch) @ rot_z(roll)
     T = np.eye(4)
     T[:3, :3] = R
     T[:3, 3] = (offset[0], offset[1], distance)
     return T
-
-
-def _rot_x(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=float)
-
-
-def _rot_y(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], dtype=float)
-
-
-def _rot_z(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=float)
 
 
 def _project(K: np.ndarray, T: np.ndarray, pts: np.ndarray) -> np.ndarray:

@@ -5,13 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from mmexec.skills.perception.averaging import (
-    MarkerPoseEstimator,
-    average_poses,
-    matrix_to_quat,
-    quat_to_matrix,
-    rotation_angle,
-)
+from mmexec.drivers.geometry import matrix_to_quat, quat_to_matrix
+from mmexec.skills.perception.averaging import MarkerPoseEstimator, average_poses, rotation_angle
 
 
 def _rand_rot(rng, scale):

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+from mmexec.drivers.geometry import rigid_fit
 from mmexec.skills.perception.averaging import rotation_angle
 from mmexec.skills.perception.panel import (
     Button,
@@ -17,7 +18,6 @@ from mmexec.skills.perception.panel import (
     fit_panel,
     press_path,
     press_paths,
-    rigid_fit,
 )
 
 # the thesis' box: 7 markers around 3 buttons of different sizes (panel frame, m)
