@@ -72,7 +72,7 @@ class Guard:
         if kind not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
-        if self.token is not None and not self._authorised(scope):
+        if self.token is not None and not self._authorised(scope) and not self._preflight(scope):
             if kind == "websocket":
                 await send({"type": "websocket.close", "code": 4401, "reason": "token required"})
                 return
@@ -112,6 +112,15 @@ class Guard:
             await self.app(scope, replay, send)
             return
         await self.app(scope, receive, send)
+
+    @staticmethod
+    def _preflight(scope: Scope) -> bool:
+        """A browser's CORS preflight (it carries no token by design): the CORS layer
+        answers it (only for the configured origins); no endpoint runs."""
+        if scope["type"] != "http" or scope["method"] != "OPTIONS":
+            return False
+        names = {name for name, _ in scope.get("headers") or []}
+        return b"origin" in names and b"access-control-request-method" in names
 
     def _authorised(self, scope: Scope) -> bool:
         assert self.token is not None
@@ -195,7 +204,7 @@ def create_app(service: Service, *, token: str | None = None) -> Any:
 
     @app.get("/api/prompts", summary="Operator prompts waiting for an answer")
     def prompts() -> list[dict[str, Any]]:
-        return [p.to_json() for p in service.prompts.open_prompts()]
+        return service.open_prompts()
 
     @app.get("/api/prompts/{pid}/image", summary="A prompt's image (JPEG)",
              responses={200: {"content": {"image/jpeg": {}}}})
@@ -231,7 +240,7 @@ def create_app(service: Service, *, token: str | None = None) -> Any:
             return
         client = service.hub.attach(asyncio.get_running_loop(), wanted)
         await ws.send_json({"type": "hello", "data": {"topics": list(wanted), "status": service.status(),
-                                                      "prompts": [p.to_json() for p in service.prompts.open_prompts()]}})
+                                                      "prompts": service.open_prompts()}})
 
         async def pump() -> None:
             while True:

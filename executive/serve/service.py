@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from mmexec.drivers.interfaces import Robot
+from mmexec.executive.eventlog import to_jsonable
 from mmexec.executive.runner import RequestResult, Runner, RunOptions
 from mmexec.executive.serve.prompts import PromptBoard
 from mmexec.executive.serve.settings import ServeSettings, parse_section
@@ -151,7 +152,11 @@ class Hub:
             return any(topic in c.topics for c in self._clients)
 
     def publish(self, topic: str, data: Any) -> None:
-        text = json.dumps({"type": topic, "data": data}, separators=(",", ":"), allow_nan=False)
+        """Send ``{"type": topic, "data": data}`` to the clients of ``topic`` (any thread).
+        ``data`` is made plain JSON first (a NaN becomes a string), except event records,
+        which the event log made so already."""
+        payload = data if topic == "event" else to_jsonable(data)
+        text = json.dumps({"type": topic, "data": payload}, separators=(",", ":"), allow_nan=False)
         with self._lock:
             if topic in _STICKY:
                 self._latest[topic] = text
@@ -206,6 +211,12 @@ class TreeView:
 
 
 # --------------------------------------------------------------------------- service state
+
+
+def prompt_json(prompt: dict[str, Any]) -> dict[str, Any]:
+    """A prompt's JSON with ``image_url``, where its image is served (null: none)."""
+    has = prompt.get("has_image")
+    return {**prompt, "image_url": f"/api/prompts/{prompt['id']}/image" if has else None}
 
 
 class Service:
@@ -366,9 +377,13 @@ class Service:
     def _changed(self) -> None:
         self._wake.set()
 
+    def open_prompts(self) -> list[dict[str, Any]]:
+        """The open prompts as the API and the stream show them (P in docs/console.md)."""
+        return [prompt_json(p.to_json()) for p in self.prompts.open_prompts()]
+
     def _on_prompt(self, kind: str, data: dict[str, Any]) -> None:
-        if kind == "prompt" and data.get("has_image"):
-            data = {**data, "image_url": f"/api/prompts/{data['id']}/image"}
+        if kind == "prompt":
+            data = prompt_json(data)
         self.hub.publish("prompt", {"action": kind, **data})
         self._wake.set()
 

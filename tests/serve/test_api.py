@@ -219,6 +219,15 @@ def test_cors_closed_by_default_and_opened_by_config(missions: Path) -> None:
     assert r.headers["access-control-allow-origin"] == "http://console.lab:8080"
     r = opened.options("/api/requests", headers=preflight)
     assert r.headers.get("access-control-allow-origin") != "http://evil.example"
+    # with a token, a preflight (which never carries one) is answered by the CORS layer alone
+    guarded = TestClient(create_app(Service(mission, settings), token="s" * 32))
+    r = guarded.options("/api/requests", headers={**preflight, "Origin": "http://console.lab:8080"})
+    assert r.status_code == 200 and r.headers["access-control-allow-origin"] == "http://console.lab:8080"
+    assert guarded.post("/api/requests", json={"item": 1}, headers={"Origin": "http://console.lab:8080"}
+                        ).status_code == 401
+    closed_guarded = TestClient(create_app(Service(mission, ServeSettings()), token="s" * 32))
+    r = closed_guarded.options("/api/requests", headers=preflight)
+    assert r.status_code == 405 and "access-control-allow-origin" not in r.headers
 
 
 def test_no_files_are_served(live: Any) -> None:

@@ -197,6 +197,7 @@ def test_answer_through_the_api(live: Any) -> None:
     rid = c.post("/api/requests", json={"item": 7}).json()["id"]
     prompt = svc.prompt()
     assert prompt["kind"] == "confirm" and prompt["text"] == "grasp item 7?" and prompt["node"] == "ask_confirm/confirm"
+    assert prompt["has_image"] is False and prompt["image_url"] is None
     assert c.get("/api/status").json()["prompts"] == [prompt["id"]]
     bad = c.post(f"/api/prompts/{prompt['id']}/answer", json={"answer": "maybe"})
     assert bad.status_code == 422
