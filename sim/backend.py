@@ -6,8 +6,9 @@ optional, unknown keys are errors; see docs/sim.md):
 
 ``robot`` (locobot_wx250s | ur5e_robotiq), ``world`` (shipped name or path),
 ``physics_hz`` (240), ``camera`` (width, height, hfov, near, far, noise, pan, tilt,
-mount), ``lidar`` (beams, range_min, range_max, noise), ``odometry_noise`` (linear,
-angular), ``faults`` (see :mod:`mmexec.sim.faults`), ``randomize`` (false).
+mount), ``lidar`` (beams, range_min, range_max, noise, noise_fraction, quality),
+``odometry_noise`` (profile, linear, angular, scale, gyro_scale, gyro_bias, slip),
+``faults`` (see :mod:`mmexec.sim.faults`), ``randomize`` (false).
 
 ``options``: ``gui`` (bool) opens the pybullet window; ``record`` (Path or None) writes a
 chase-camera video, finalised by :meth:`SimRobot.close`.
@@ -18,17 +19,25 @@ from __future__ import annotations
 import logging
 import math
 import os
-from collections.abc import Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
+import cv2
 import numpy as np
 import pybullet as p
 
 from mmexec.config.yamlload import Mark, Problems, YDict, bind, did_you_mean
-from mmexec.drivers.interfaces import CameraIntrinsics, CapabilityError, Pose2D, Robot
+from mmexec.drivers.interfaces import (
+    CameraIntrinsics,
+    CapabilityError,
+    OccupancyGrid,
+    Pose2D,
+    Robot,
+)
 from mmexec.sim.capabilities import (
+    ODOMETRY_PROFILES,
     CameraNoise,
     OdometryNoise,
     SimArm,
@@ -53,7 +62,7 @@ from mmexec.sim.scene import (
 )
 from mmexec.sim.world import World, load_world
 
-__all__ = ["CameraSection", "LidarSection", "SimError", "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
+__all__ = ["CameraSection", "LidarSection", "OdometrySection", "SimError", "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
 
 log = logging.getLogger(__name__)
 
@@ -92,13 +101,19 @@ class CameraSection:
 
 @dataclass(frozen=True)
 class LidarSection:
-    """Lidar: ``beams`` per 360 degree scan (RPLIDAR A2 at 10 Hz: 800; default 400 as the
-    official Gazebo stand-in, for speed), ``range_min``/``range_max`` [m], range ``noise`` std [m]."""
+    """Lidar: ``beams`` per 360 degree scan (RPLIDAR A2 at 10 Hz: 800 at 8 k samples/s,
+    400 at 4 k; default 400 as the official Gazebo stand-in), ``range_min``/``range_max``
+    [m], range noise std ``noise`` [m] plus ``noise_fraction`` of the range (in
+    quadrature; the A2's error is about 1 % of the range), intensity ``quality`` model
+    (``binary`` 1.0 / 0.2, or ``rplidar_a2``: the device's quality / 63, see
+    :class:`~mmexec.sim.capabilities.SimLidar`)."""
 
     beams: int = 400
     range_min: float = 0.15
     range_max: float = 12.0
     noise: float = 0.01
+    noise_fraction: float = 0.0
+    quality: Literal["binary", "rplidar_a2"] = "binary"
 
     def validate(self) -> list[str]:
         out = []
@@ -106,9 +121,32 @@ class LidarSection:
             out.append(f"lidar beams {self.beams} outside 8..16000")
         if not 0 <= self.range_min < self.range_max:
             out.append(f"lidar needs 0 <= range_min < range_max, got {self.range_min}, {self.range_max}")
-        if self.noise < 0:
-            out.append("lidar noise must be >= 0")
+        if self.noise < 0 or self.noise_fraction < 0:
+            out.append("lidar noise and noise_fraction must be >= 0")
         return out
+
+
+@dataclass(frozen=True)
+class OdometrySection:
+    """Odometry noise: a named ``profile`` (:data:`~mmexec.sim.capabilities.ODOMETRY_PROFILES`:
+    ``default``, or ``realistic`` for the localisation campaigns) whose values any key
+    given here replaces (see :class:`~mmexec.sim.capabilities.OdometryNoise` for each)."""
+
+    profile: Literal["default", "realistic"] = "default"
+    linear: float | None = None
+    angular: float | None = None
+    scale: float | None = None
+    gyro_scale: float | None = None
+    gyro_bias: float | None = None
+    slip: float | None = None
+
+    def model(self) -> OdometryNoise:
+        """The profile with this section's values in place of its own."""
+        given = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "profile"}
+        return replace(ODOMETRY_PROFILES[self.profile], **{k: v for k, v in given.items() if v is not None})
+
+    def validate(self) -> list[str]:
+        return self.model().validate()
 
 
 @dataclass(frozen=True)
@@ -120,7 +158,7 @@ class SimSection:
     physics_hz: int = 240
     camera: CameraSection = field(default_factory=CameraSection)
     lidar: LidarSection = field(default_factory=LidarSection)
-    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    odometry_noise: OdometrySection = field(default_factory=OdometrySection)
     faults: FaultConfig = field(default_factory=FaultConfig)
     randomize: bool = False
 
@@ -139,17 +177,44 @@ def parse_section(section: YDict | Mapping[str, Any] | None) -> SimSection:
 
 
 def _check_fault_items(cfg: SimSection, world: World, section: Any) -> None:
-    names = set(world.item_names())
+    """The items and reflectors the faults name exist in ``world``; a kidnap pose lies in
+    the room."""
     faults = section.get("faults") if isinstance(section, Mapping) else None
     default = getattr(section, "mark", Mark("<sim>", 1, 1))
+
+    def mark(key: str) -> Mark:
+        return faults.value_mark(key.split(".")[0]) if isinstance(faults, YDict) else default
+
     problems = Problems()
-    for key, item in cfg.faults.item_names():
-        if item not in names:
-            top = key.split(".")[0]
-            m = faults.value_mark(top) if isinstance(faults, YDict) else default
-            problems.add(m, f"sim.faults.{key}: no item {item!r} in world {world.name!r}"
-                         + (did_you_mean(item, names) or f" (items: {', '.join(sorted(names))})"))
+    kinds = (("item", "items", set(world.item_names()), cfg.faults.item_names()),
+             ("reflector", "reflectors", {r.name for r in world.spec.reflectors},
+              [("reflector_dropout.reflectors", n) for n in cfg.faults.reflector_dropout.reflectors]))
+    for what, plural, names, refs in kinds:
+        for key, name in refs:
+            if name not in names:
+                problems.add(mark(key), f"sim.faults.{key}: no {what} {name!r} in world {world.name!r}"
+                             + (did_you_mean(name, names) or f" ({plural}: {', '.join(sorted(names)) or 'none'})"))
+    kid = cfg.faults.kidnap
+    if kid is not None and kid.pose is not None:
+        radius = MODEL_INFO[cfg.robot].footprint_radius
+        if not _map_clearance(world.occupancy(0.05))(kid.pose[0], kid.pose[1], radius):
+            problems.add(mark("kidnap"), f"sim.faults.kidnap.pose: the base ({radius} m radius) at ({kid.pose[0]}, "
+                                         f"{kid.pose[1]}) would overlap the static geometry of world {world.name!r}")
     problems.raise_if_any()
+
+
+def _map_clearance(grid: OccupancyGrid) -> Callable[[float, float, float], bool]:
+    """``clear(x, y, r)``: whether a disk of radius ``r`` [m] at map point ``(x, y)`` lies in
+    ``grid`` and away from its occupied cells (to within a cell)."""
+    free = np.where(grid.data >= 50, 0, 255).astype(np.uint8)
+    dist = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) * grid.resolution
+
+    def clear(x: float, y: float, r: float) -> bool:
+        col = math.floor((x - grid.origin.x) / grid.resolution)
+        row = math.floor((y - grid.origin.y) / grid.resolution)
+        return 0 <= row < grid.height and 0 <= col < grid.width and float(dist[row, col]) > r
+
+    return clear
 
 
 @dataclass
@@ -214,7 +279,7 @@ class SimRobot(Robot):
         self.occupancy = world.occupancy(0.05)
         self.scene = world.scene_boxes()
         info = core.info
-        self.base = SimBase(core, cfg.odometry_noise, ("base_link",) if cfg.robot == "locobot_wx250s" else ("mobile_base_link",))
+        self.base = SimBase(core, cfg.odometry_noise.model(), ("base_link",) if cfg.robot == "locobot_wx250s" else ("mobile_base_link",))
         self.arm = SimArm(core)
         self.gripper = SimGripper(core)
         w, h = cfg.camera.width or info.camera_size[0], cfg.camera.height or info.camera_size[1]
@@ -228,12 +293,15 @@ class SimRobot(Robot):
         self.camera = SimCamera(core, intr, cfg.camera.near, cfg.camera.far, cfg.camera.noise, self.base, mount)
         if info.pan_tilt_joints:
             self.camera.set_pan_tilt(cfg.camera.pan, cfg.camera.tilt)
-        self.lidar = SimLidar(core, cfg.lidar.beams, cfg.lidar.range_min, cfg.lidar.range_max, cfg.lidar.noise,
-                              reflectors=frozenset(r.name for r in world.spec.reflectors))
+        lid = cfg.lidar
+        self.lidar = SimLidar(core, lid.beams, lid.range_min, lid.range_max, lid.noise,
+                              reflectors=frozenset(r.name for r in world.spec.reflectors),
+                              noise_fraction=lid.noise_fraction, quality=lid.quality)
         self.truth = SimTruth(self)  #: SIM-ONLY ground truth (tests, campaign scoring)
         core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
         self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}
         self.physics_steps = 0  #: substeps that ran stepSimulation (the others were at rest)
+        self._kidnap_pending = cfg.faults.kidnap is not None
         self._closed = False
 
     def _at_rest(self, period: float) -> bool:
@@ -280,6 +348,8 @@ class SimRobot(Robot):
         rest = self._at_rest(period)
         core = self.core
         for _ in range(n):
+            if self._kidnap_pending:
+                self._kidnap()
             self.base.update(dt)
             if not rest:
                 self.arm.update(dt)
@@ -292,6 +362,24 @@ class SimRobot(Robot):
                 core.sync()
                 tp = core.true_pose
                 self.recorder.sample(self.clock.now(), (tp.x, tp.y), tp.theta)
+
+    def _kidnap(self) -> None:
+        """The ``kidnap`` fault: once due, put the base at the injector's pose (the
+        odometry keeps integrating from where it was)."""
+        core = self.core
+        here = core.true_pose
+        sx, sy = self.world.spec.room.size
+        clearance = core.clearance
+        margin = self.base.bump_radius + 0.05
+        in_map = _map_clearance(self.occupancy)  # also away from what only the map shows (a table top)
+
+        def clear(x: float, y: float) -> bool:
+            return in_map(x, y, margin) and clearance is not None and clearance.clear(x, y, margin)
+
+        pose = self.injector.kidnap_pose(self.clock.now(), (here.x, here.y), clear, (0.0, 0.0, sx, sy))
+        if pose is not None:
+            self._kidnap_pending = False
+            core.place_base(Pose2D(*pose))
 
     def close(self) -> None:
         if self._closed:

@@ -19,7 +19,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import cv2
 import numpy as np
@@ -143,12 +143,52 @@ class SimCore:
 
 @dataclass(frozen=True)
 class OdometryNoise:
-    """Odometry drift per substep increment: the measured distance is ``ds * (1 + linear
-    * n1)`` and the measured turn ``dth + |dth| * angular * n2 + |ds| * 0.1 * angular *
-    n3`` (n ~ N(0, 1)), so the estimate drifts like wheel slip and gyro bias would."""
+    """How the odometry drifts from the true motion.
+
+    Per substep (random, n ~ N(0, 1) each): the measured distance is ``ds * (1 + linear *
+    n1)`` and the measured turn ``dth + |dth| * angular * n2 + |ds| * 0.1 * angular * n3``.
+
+    Systematic (all 0 by default; the ``realistic`` profile of :data:`ODOMETRY_PROFILES`
+    sets them), each drawn once per run as ``N(0, value)``:
+
+    * ``scale``: wheel-radius error, the measured distance is ``(1 + e_scale)`` times the
+      true one [fraction];
+    * ``gyro_scale``: gyro scale error, the measured turn is ``(1 + e_gyro)`` times the
+      true one [fraction] (the Kobuki's heading comes from its gyro);
+    * ``gyro_bias``: a constant yaw-rate bias [rad/s], integrated while the base moves (at
+      rest the sim's base is not integrated, as an odometry that holds still when the
+      wheels do);
+
+    and ``slip`` [s^2/m]: wheel slip under acceleration, ``ds * slip * a * |n4|`` added
+    to the measured distance, ``a`` [m/s^2] the acceleration along the motion (speeding
+    up: the wheels spin ahead of the ground; braking: they lag behind it)."""
 
     linear: float = 0.01
     angular: float = 0.02
+    scale: float = 0.0
+    gyro_scale: float = 0.0
+    gyro_bias: float = 0.0
+    slip: float = 0.0
+
+    def validate(self) -> list[str]:
+        bad = [f.name for f in fields(self) if not getattr(self, f.name) >= 0]
+        return [f"odometry noise {', '.join(bad)} must be >= 0"] if bad else []
+
+    @property
+    def systematic(self) -> bool:
+        """True when any per-run error or slip is on (draws from the generator at build)."""
+        return bool(self.scale or self.gyro_scale or self.gyro_bias or self.slip)
+
+
+#: Named odometry-noise profiles (``sim.odometry_noise.profile``). ``realistic`` is a
+#: Kobuki-class base on an indoor floor: 2 % wheel-radius error (tyre wear and load,
+#: floor), 1 % gyro scale error, 0.06 deg/s gyro bias (a MEMS gyro after its power-on
+#: calibration), slip under acceleration, on top of the default random terms (see
+#: docs/localization.md).
+ODOMETRY_PROFILES: dict[str, OdometryNoise] = {
+    "default": OdometryNoise(),
+    "realistic": OdometryNoise(linear=0.01, angular=0.02, scale=0.02, gyro_scale=0.01, gyro_bias=0.001, slip=0.1),
+}
 
 
 class SimBase(Base):
@@ -167,6 +207,14 @@ class SimBase(Base):
         self._v = 0.0
         self._w = 0.0
         self._est = core.true_pose
+        # per-run systematic odometry errors (drawn only when the profile has them, so a
+        # config without them draws nothing and reproduces its runs)
+        self._scale, self._gyro_scale, self._gyro_bias = 1.0, 1.0, 0.0
+        if noise.systematic:
+            e = core.rng.standard_normal(3)
+            self._scale = 1.0 + noise.scale * float(e[0])
+            self._gyro_scale = 1.0 + noise.gyro_scale * float(e[1])
+            self._gyro_bias = noise.gyro_bias * float(e[2])
         self._faults: frozenset[str] = frozenset()
         self._bump_links = tuple(core.links[n] for n in bump_links)
         self.bumps = 0  #: number of substeps refused for collision (for tests and scoring)
@@ -218,6 +266,7 @@ class SimBase(Base):
         if self._faults & {"bumper_left", "bumper_centre", "bumper_right"} and tv > 0:
             tv = 0.0 if self._v >= 0 else tv
         dv, dw = self.max_linear_accel * dt, self.max_angular_accel * dt
+        v_before = self._v
         self._v += max(-dv, min(dv, tv - self._v))
         self._w += max(-dw, min(dw, tw - self._w))
         if self._v == 0.0 and self._w == 0.0:
@@ -245,6 +294,10 @@ class SimBase(Base):
         n = self._noise
         ds_m = ds * (1.0 + n.linear * c.rng.standard_normal()) if n.linear else ds
         dth_m = dth + abs(dth) * n.angular * c.rng.standard_normal() + abs(ds) * n.angular * 0.1 * c.rng.standard_normal() if n.angular else dth
+        if n.systematic:
+            along = (self._v - v_before) / dt * (1.0 if self._v >= 0 else -1.0)  # [m/s^2], > 0 speeding up
+            ds_m = ds_m * self._scale + (ds * n.slip * along * abs(c.rng.standard_normal()) if n.slip else 0.0)
+            dth_m = dth_m * self._gyro_scale + self._gyro_bias * dt
         e = self._est
         eth = e.theta + dth_m / 2
         self._est = Pose2D(e.x + ds_m * math.cos(eth), e.y + ds_m * math.sin(eth), _wrap(e.theta + dth_m))
@@ -707,21 +760,36 @@ class SimCamera(Camera):
 
 class SimLidar(Lidar):
     """360 degree planar scan by ray casting (``rayTestBatch``, ``numThreads=0``) in the
-    lidar frame: ``beams`` rays from angle -pi CCW, ``range_min`` .. ``range_max`` [m],
-    Gaussian range ``noise`` std [m]; no return is ``inf``.
+    lidar frame: ``beams`` rays from angle -pi CCW, ``range_min`` .. ``range_max`` [m]; no
+    return is ``inf``. Range noise is Gaussian with std ``sqrt(noise^2 + (noise_fraction *
+    r)^2)`` [m] at range ``r`` (the RPLIDAR A2's error grows with the range).
 
-    ``intensities``: :attr:`REFLECTOR_INTENSITY` where the beam hits one of the world's
-    laser reflectors, :attr:`SURFACE_INTENSITY` on any other surface, 0 for no return."""
+    ``intensities`` (``quality``):
+
+    * ``binary``: :attr:`REFLECTOR_INTENSITY` where the beam hits one of the world's laser
+      reflectors, :attr:`SURFACE_INTENSITY` on any other surface, 0 for no return;
+    * ``rplidar_a2``: the device's 6-bit quality over 63, as the driver reports it: a
+      reflector returns 56..63, any other surface at most 50 (``47 * (0.6 + 0.4 cos(i)) -
+      1.5 r`` plus noise, ``i`` the incidence angle), so the two never overlap.
+
+    A ``reflector_dropout`` fault (:mod:`mmexec.sim.faults`) covers reflectors: they
+    return as ordinary surfaces while it lasts."""
 
     REFLECTOR_INTENSITY = 1.0
     SURFACE_INTENSITY = 0.2
 
     def __init__(self, core: SimCore, beams: int, range_min: float, range_max: float, noise: float,
-                 reflectors: frozenset[str] = frozenset()) -> None:
+                 reflectors: frozenset[str] = frozenset(), *, noise_fraction: float = 0.0,
+                 quality: str = "binary") -> None:
+        if quality not in ("binary", "rplidar_a2"):
+            raise ValueError(f"lidar quality model {quality!r}: expected 'binary' or 'rplidar_a2'")
         self._c = core
         names = core.scene.static_names
-        self._reflector_links = np.array([i for i, n in enumerate(names) if n in reflectors], dtype=int)
+        #: reflector name -> its link index in the static body
+        self._reflector_link = {n: i for i, n in enumerate(names) if n in reflectors}
+        self._reflector_links = np.array(sorted(self._reflector_link.values()), dtype=int)
         self.beams, self.range_min, self.range_max, self.noise = beams, range_min, range_max, noise
+        self.noise_fraction, self.quality = noise_fraction, quality
         self._inc = 2 * math.pi / beams
         ang = -math.pi + self._inc * np.arange(beams)
         self._dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(beams)], axis=1)
@@ -740,13 +808,35 @@ class SimLidar(Lidar):
         hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=c.cid)
         frac = np.array([h[2] if h[0] >= 0 else np.inf for h in hits])
         static = c.scene.static
-        refl = np.array([h[0] == static and h[1] in self._reflector_links for h in hits], dtype=bool)
-        intensity = np.where(np.isfinite(frac), self.SURFACE_INTENSITY, 0.0)
-        intensity[refl] = self.REFLECTOR_INTENSITY
+        links = self._reflector_links
+        covered = c.faults.reflectors_covered(now)  # reflector_dropout: None, or the names (empty: all)
+        if covered is not None:
+            lit = [i for n, i in self._reflector_link.items() if covered and n not in covered]
+            links = np.array(lit, dtype=int)
+        refl = np.array([h[0] == static and h[1] in links for h in hits], dtype=bool)
         ranges = self.range_min + frac * (self.range_max - self.range_min)
-        if self.noise > 0:
+        if self.quality == "binary":
+            intensity = np.where(np.isfinite(frac), self.SURFACE_INTENSITY, 0.0)
+            intensity[refl] = self.REFLECTOR_INTENSITY
+        else:
+            intensity = self._a2_quality(hits, d, ranges, refl)
+        if self.noise_fraction > 0:
+            sigma = np.hypot(self.noise, self.noise_fraction * np.where(np.isfinite(ranges), ranges, 0.0))
+            ranges = ranges + sigma * c.rng.standard_normal(ranges.shape)
+        elif self.noise > 0:
             ranges = ranges + c.rng.normal(0.0, self.noise, ranges.shape)
         self.scans += 1
         return LaserScan(angle_min=-math.pi, angle_increment=self._inc, ranges=ranges.astype(np.float64),
                          range_min=self.range_min, range_max=self.range_max, stamp=now,
                          T_base_lidar=c.in_base(c.info.lidar_link), intensities=intensity)
+
+    def _a2_quality(self, hits: Sequence[tuple], dirs: np.ndarray, ranges: np.ndarray, refl: np.ndarray) -> np.ndarray:
+        """RPLIDAR A2-like intensities (quality / 63) of one scan (class doc)."""
+        rng = self._c.rng
+        hit = np.isfinite(ranges)
+        normals = np.array([h[4] for h in hits], dtype=np.float64).reshape(-1, 3)
+        cos_i = np.clip(np.abs(np.einsum("ij,ij->i", normals, dirs)), 0.0, 1.0)
+        surface = 47.0 * (0.6 + 0.4 * cos_i) - 1.5 * np.where(hit, ranges, 0.0) + rng.normal(0.0, 2.0, len(ranges))
+        reflector = 62.0 + rng.normal(0.0, 1.5, len(ranges))
+        q = np.where(refl, np.clip(np.round(reflector), 56, 63), np.clip(np.round(surface), 1, 50))
+        return np.where(hit, q / 63.0, 0.0)

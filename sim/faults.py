@@ -11,7 +11,15 @@ Each fault exercises one recovery path of a mission (see docs/sim.md):
 * ``grasp_slip: {after: 1.0, items: [box_1]}``: a held item slips out of the gripper
   ``after`` seconds of holding (items empty = every item);
 * ``camera_dropout`` / ``lidar_dropout``: ``{p: 0.2, intervals: [[10, 20]]}``: a frame or
-  scan is None with probability ``p`` and always inside the clock-time intervals [s].
+  scan is None with probability ``p`` and always inside the clock-time intervals [s];
+* ``reflector_dropout``: ``{intervals: [[20, 40]], p: 0.0, reflectors: [refl_sw]}``: the
+  named laser reflectors (empty = all) are covered: the lidar sees them as ordinary
+  surfaces (low intensity), per scan with probability ``p`` and always inside the
+  intervals; the posts stay where they are;
+* ``kidnap``: ``{at: 30.0, pose: [x, y, yaw]}``: once, at clock time ``at`` [s], the robot
+  is lifted and put down at ``pose`` in ``map`` (omitted: a random pose clear of the
+  static geometry, at least ``min_distance`` [m] from where it was); the odometry does
+  not notice.
 
 Randomness comes from the backend's seeded generator, so a seed reproduces the faults.
 """
@@ -19,6 +27,7 @@ Randomness comes from the backend's seeded generator, so a seed reproduces the f
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -26,7 +35,7 @@ import numpy as np
 
 from mmexec.sim.world import Obstacle, World
 
-__all__ = ["Dropout", "FaultConfig", "FaultInjector", "GraspSlip", "blocking_obstacles"]
+__all__ = ["Dropout", "FaultConfig", "FaultInjector", "GraspSlip", "Kidnap", "ReflectorDropout", "blocking_obstacles"]
 
 
 @dataclass(frozen=True)
@@ -40,6 +49,29 @@ class Dropout:
         out = [] if 0.0 <= self.p <= 1.0 else [f"p must be in [0, 1], got {self.p}"]
         out += [f"interval [{a}, {b}] must have start <= end" for a, b in self.intervals if a > b]
         return out
+
+
+@dataclass(frozen=True)
+class ReflectorDropout(Dropout):
+    """Covered laser reflectors: ``reflectors`` (names; empty = all) return as ordinary
+    surfaces with probability ``p`` per scan and always inside ``intervals`` [s]."""
+
+    reflectors: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Kidnap:
+    """Teleport the robot once at clock time ``at`` [s] to ``pose`` ``(x [m], y [m], yaw
+    [rad])`` in ``map``, or, when None, to a random pose clear of the static geometry and
+    at least ``min_distance`` [m] away."""
+
+    at: float
+    pose: tuple[float, float, float] | None = None
+    min_distance: float = 1.0
+
+    def validate(self) -> list[str]:
+        out = [] if self.at >= 0 else [f"at must be >= 0 s, got {self.at}"]
+        return out + ([] if self.min_distance >= 0 else [f"min_distance must be >= 0 m, got {self.min_distance}"])
 
 
 @dataclass(frozen=True)
@@ -65,6 +97,8 @@ class FaultConfig:
     grasp_slip: GraspSlip | None = None
     camera_dropout: Dropout = field(default_factory=Dropout)
     lidar_dropout: Dropout = field(default_factory=Dropout)
+    reflector_dropout: ReflectorDropout = field(default_factory=ReflectorDropout)
+    kidnap: Kidnap | None = None
 
     def validate(self) -> list[str]:
         out = [f"arm_fail_attempts: attempt numbers start at 1, got {a}" for a in self.arm_fail_attempts if a < 1]
@@ -108,6 +142,7 @@ class FaultInjector:
         self.cfg = cfg
         self._rng = rng
         self.arm_attempts = 0
+        self._kidnapped = False
         self.fired: list[tuple[float, str]] = []  #: (clock time, fault) log, for tests and campaigns
 
     def arm_attempt_fails(self, now: float) -> bool:
@@ -129,6 +164,34 @@ class FaultInjector:
 
     def lidar_dropped(self, now: float) -> bool:
         return self._dropped(self.cfg.lidar_dropout, now, "lidar_dropout")
+
+    def reflectors_covered(self, now: float) -> frozenset[str] | None:
+        """The reflectors covered for a scan at ``now`` [s] (an empty set: all of them), or
+        None when none is."""
+        d = self.cfg.reflector_dropout
+        return frozenset(d.reflectors) if self._dropped(d, now, "reflector_dropout") else None
+
+    def kidnap_pose(self, now: float, here: tuple[float, float], clear: Callable[[float, float], bool],
+                    bounds: tuple[float, float, float, float]) -> tuple[float, float, float] | None:
+        """Once the kidnap is due at ``now`` [s] (and only once): where to put the robot,
+        ``(x, y, yaw)`` in ``map``. A random pose is drawn uniformly in ``bounds`` ``(x0,
+        y0, x1, y1)`` [m] until ``clear(x, y)`` and it lies ``min_distance`` from ``here``."""
+        k = self.cfg.kidnap
+        if k is None or self._kidnapped or now < k.at:
+            return None
+        self._kidnapped = True
+        pose = k.pose
+        if pose is None:
+            x0, y0, x1, y1 = bounds
+            for _ in range(10000):
+                x, y = float(self._rng.uniform(x0, x1)), float(self._rng.uniform(y0, y1))
+                if math.hypot(x - here[0], y - here[1]) >= k.min_distance and clear(x, y):
+                    pose = (x, y, float(self._rng.uniform(-math.pi, math.pi)))
+                    break
+            else:
+                raise RuntimeError(f"kidnap: no clear pose {k.min_distance} m from {here} in 10000 draws")
+        self.fired.append((now, f"kidnap to ({pose[0]:.3f}, {pose[1]:.3f}, {pose[2]:.3f})"))
+        return pose
 
     def slip_after(self, item: str) -> float | None:
         """Seconds of holding after which ``item`` slips out, or None."""

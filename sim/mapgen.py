@@ -4,7 +4,10 @@ A lab that builds a room like a sim world (``sim/worlds/*.yaml``) can run the re
 on the map and scene the sim uses: :func:`world_map` is the sim's own navigation grid
 (:meth:`mmexec.sim.world.World.occupancy`, nominal poses), :func:`write_map` saves an
 occupancy grid as a map_server map (YAML + 8-bit PGM, read back by
-:func:`mmexec.skills.navigation.grid.load_map`), and :func:`scene_yaml` prints the
+:func:`mmexec.skills.navigation.grid.load_map`) with the world's laser reflectors under a
+``reflectors:`` key (name, centre ``position`` [x, y] in ``map`` [m], post ``radius`` [m];
+map_server ignores the key, :func:`mmexec.skills.localization.landmarks.load_reflectors`
+reads it), and :func:`scene_yaml` prints the
 world's static boxes (:meth:`~mmexec.sim.world.World.scene_boxes`) as ``robot.scene``
 entries of a run config. ``config/maps/lab.{yaml,pgm}`` were written by::
 
@@ -18,8 +21,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import math
+import re
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
@@ -28,7 +34,7 @@ import numpy as np
 from mmexec.config.brokenpipe import detach_stdout
 from mmexec.config.yamlload import InputError, Mark
 from mmexec.drivers.interfaces import OccupancyGrid
-from mmexec.sim.world import World, load_world
+from mmexec.sim.world import Reflector, World, load_world
 
 __all__ = ["FREE", "OCCUPIED", "UNKNOWN", "pgm_bytes", "scene_yaml", "world_map", "write_map"]
 
@@ -61,9 +67,11 @@ def pgm_bytes(grid: OccupancyGrid, comment: str = "") -> bytes:
     return head.encode("ascii") + img.tobytes()
 
 
-def write_map(grid: OccupancyGrid, yaml_path: str | Path, *, comment: str = "") -> tuple[Path, Path]:
+def write_map(grid: OccupancyGrid, yaml_path: str | Path, *, comment: str = "",
+              reflectors: Sequence[Reflector] = ()) -> tuple[Path, Path]:
     """Write ``grid`` as ``yaml_path`` plus a PGM of the same stem next to it (trinary,
-    negate 0, map_server's default thresholds). Returns both paths."""
+    negate 0, map_server's default thresholds), with ``reflectors`` (positions in ``map``)
+    listed under the YAML's ``reflectors:`` key when there are any. Returns both paths."""
     o = grid.origin
     if abs(o.theta) > 1e-12:
         raise ValueError("write_map: map_server maps with a rotated origin are not supported")
@@ -80,8 +88,23 @@ def write_map(grid: OccupancyGrid, yaml_path: str | Path, *, comment: str = "") 
         "free_thresh: 0.196",
         "mode: trinary",
     ]
+    if reflectors:
+        lines.append("reflectors:             # laser-reflector posts (mmexec): centre [x, y] in map [m], radius [m]")
+        lines += [f"  - {{name: {_name(r.name)}, position: [{_num(r.position[0])}, {_num(r.position[1])}], "
+                  f"radius: {_num(r.radius)}}}" for r in reflectors]
     yaml_path.write_text("\n".join(lines) + "\n")
     return yaml_path, pgm_path
+
+
+def _name(name: str) -> str:
+    """``name`` as a YAML flow scalar: plain when that reads back as the same string,
+    else double-quoted (JSON's quoting is valid YAML)."""
+    plain = re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.-]*", name) and name.lower() not in _YAML_WORDS
+    return name if plain else json.dumps(name)
+
+
+#: plain scalars YAML reads as booleans or null
+_YAML_WORDS = frozenset({"true", "false", "yes", "no", "on", "off", "y", "n", "null"})
 
 
 def _num(v: float) -> str:
@@ -168,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     with contextlib.suppress(ValueError):  # a world outside the package keeps its own path
         source = source.resolve().relative_to(Path(__file__).resolve().parents[1])
     try:
-        yaml_path, pgm_path = write_map(grid, out, comment=(
+        yaml_path, pgm_path = write_map(grid, out, reflectors=world.spec.reflectors, comment=(
             f"world {world.name!r} ({source.as_posix()}) at its nominal poses, written by mmexec.sim.mapgen"))
     except OSError as e:  # FileExistsError: mkdir met a file where a folder of OUT belongs
         why = "not a folder" if isinstance(e, FileExistsError) else e.strerror or str(e)

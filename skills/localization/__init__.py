@@ -4,12 +4,14 @@ laser-reflector enhancement (``reflector-amcl-tracking-grasp`` section 3.1).
 * :mod:`.motion`: the differential-drive odometry motion model;
 * :mod:`.likelihood`: the likelihood-field range-finder model;
 * :mod:`.reflectors`: reflector extraction, triangle matching, trilateration, weights;
-* :mod:`.amcl`: the particle filter that combines them.
+* :mod:`.amcl`: the particle filter that combines them;
+* :mod:`.landmarks`: a map's reflector posts, read from its map_server YAML.
 
 Pure numpy (+ OpenCV's distance transform); no capability I/O here.
 """
 
 from mmexec.skills.localization.amcl import AmclConfig, Estimate, ParticleFilter
+from mmexec.skills.localization.landmarks import ReflectorMap, load_reflectors
 from mmexec.skills.localization.likelihood import BeamModel, LikelihoodField
 from mmexec.skills.localization.motion import OdometryNoise
 from mmexec.skills.localization.reflectors import ReflectorConfig, TriangleLibrary
@@ -22,5 +24,7 @@ __all__ = [
     "OdometryNoise",
     "ParticleFilter",
     "ReflectorConfig",
+    "ReflectorMap",
     "TriangleLibrary",
+    "load_reflectors",
 ]

@@ -9,7 +9,10 @@ over the whole particle set (no per-particle Python loop):
 * ``w_slow`` / ``w_fast`` averages of the measurement likelihood (``recovery_alpha_slow``,
   ``recovery_alpha_fast``): when the short-term average falls below the long-term one,
   a share ``max(0, 1 - w_fast / w_slow)`` of the resampled set is drawn uniformly over the
-  free map (recovery from a kidnapping);
+  free map (recovery from a kidnapping). Off by default, as in ROS (its suggested 0.001 /
+  0.1 inject particles whenever the scene explains a scan less well than the average
+  over the run, and the injected particles lower the next average further: in the sim
+  lab the plain filter then ran at ``max_particles`` and lost itself);
 * low-variance resampling every ``resample_interval`` updates (only after motion);
 * the particle count adapts with KLD sampling (Fox 2003): the fewest samples such that,
   with probability ``1 - kld_delta``, the KL divergence between the sampled and the true
@@ -20,9 +23,18 @@ over the whole particle set (no per-particle Python loop):
 
 With a :class:`~.reflectors.TriangleLibrary`, every scan in which at least three reflectors
 are matched also gives a pose fix (:func:`~.reflectors.fix_from_scan`), and the weights
-become ``omega = alpha * s * omega + beta * d`` (paper equation 6) before normalising;
+become ``omega = alpha * s * omega + beta * d`` (paper equation 6) with each of the two
+terms normalised over the particle set first, so that ``alpha : beta`` is the share of
+the posterior each carries (the paper gives no scale for omega, s and d; raw, the balance
+would swing with the particle count and the spreads: with d's 3 cm spread, d outweighed
+the scan by a factor of 1000 and the estimate followed each scan's noisy fix);
 ``inject_fraction`` of the resampled set is drawn around the fix (equation 7). Below three
 matches the update is plain AMCL (the paper's algorithm 1, line 3).
+
+Defaults: ROS's, except where the sim LoCoBot campaign (benchmarks/localization.py,
+docs/localization.md) showed them far off for a Kobuki-class base with a 360 degree
+lidar: ``min_particles`` 1000, updates every 5 cm / 0.1 rad, motion-model alphas 0.01
+(:class:`~.motion.OdometryNoise`) and ``sigma_hit`` 0.1 m (:class:`~.likelihood.BeamModel`).
 
 The estimate is the weighted mean of the heaviest cluster (particles within
 ``cluster_radius`` of the heaviest histogram bin), with its covariance; ``converged`` says
@@ -63,16 +75,16 @@ __all__ = ["AmclConfig", "Estimate", "ParticleFilter", "kld_sample_count"]
 class AmclConfig:
     """Filter parameters (ROS names and defaults where ROS has them)."""
 
-    min_particles: int = 100
+    min_particles: int = 1000
     max_particles: int = 5000
     kld_err: float = 0.01
     kld_delta: float = 0.01
     kld_bin: tuple[float, float, float] = (0.5, 0.5, math.radians(10.0))
-    update_min_d: float = 0.2
-    update_min_a: float = math.pi / 6.0
+    update_min_d: float = 0.05
+    update_min_a: float = 0.1
     resample_interval: int = 1
-    recovery_alpha_slow: float = 0.001
-    recovery_alpha_fast: float = 0.1
+    recovery_alpha_slow: float = 0.0
+    recovery_alpha_fast: float = 0.0
     #: initial spread around a given pose: (sigma_xy [m], sigma_theta [rad])
     initial_sigma: tuple[float, float] = (0.25, 0.2)
     #: cluster radius of the estimate: (xy [m], theta [rad])
@@ -244,7 +256,7 @@ class ParticleFilter:
             bearings = np.array([d.bearing for d in fix.detections])
             s = orientation_score(self.particles, centres, bearings, rc, self.mount)
             d = position_weight(self.particles, fix.pose, rc)
-            w = rc.alpha * s * w + rc.beta * d
+            w = rc.alpha * _normalised(s * w) + rc.beta * _normalised(d)
             total = float(w.sum())
         self.weights = w / total if total > 0 else np.full(len(w), 1.0 / len(w))
 
@@ -330,6 +342,12 @@ class ParticleFilter:
             return np.eye(3)
         est = self.estimate().pose
         return _se2(est) @ np.linalg.inv(_se2(self._odom))
+
+
+def _normalised(w: np.ndarray) -> np.ndarray:
+    """``w`` scaled to sum 1 (all zeros when it sums to 0: that term then carries nothing)."""
+    total = float(w.sum())
+    return w / total if total > 0 else np.zeros_like(w)
 
 
 def _se2(p: np.ndarray) -> np.ndarray:

@@ -71,8 +71,9 @@ class ReflectorConfig:
     intensity_threshold: float = 0.8
     #: radius of the reflector posts [m]
     post_radius: float = 0.04
-    #: fewest beams on one reflector
-    min_beams: int = 2
+    #: fewest beams on one reflector (1: a post narrower than two beam spacings at its
+    #: range still counts, its centre placed behind the single hit, see ``_fit_post``)
+    min_beams: int = 1
     #: detections farther than this are ignored [m]
     max_range: float = 8.0
     #: side-length tolerance of triangle matching [m]
@@ -85,8 +86,9 @@ class ReflectorConfig:
     #: equation 3's position / heading spread [m], [rad] (the paper: 1 and 1)
     sigma_xy: float = 0.03
     sigma_theta: float = 0.03
-    #: equation 4's bearing spread [rad]
-    sigma_bearing: float = 0.05
+    #: equation 4's bearing spread [rad] (a post's bearing is good to about half a beam
+    #: spacing: 0.008 rad at 0.9 degrees)
+    sigma_bearing: float = 0.01
     #: share of the particle set replaced by particles drawn around the fix (equation 7)
     inject_fraction: float = 0.1
 
@@ -135,9 +137,17 @@ def _runs(mask: np.ndarray) -> list[np.ndarray]:
 
 
 def _fit_post(px: np.ndarray, py: np.ndarray, radius: float) -> tuple[float, float]:
-    """Centre of the circle of ``radius`` best fitting the hit points (seen from the origin)."""
+    """Centre of the circle of ``radius`` best fitting the hit points (seen from the origin).
+
+    One hit point says only where along its beam the surface was: the centre is taken
+    ``pi/4 * radius`` behind it, the mean depth of the post's surface under a beam that
+    crosses the post at a uniformly random offset (pushing back by the full radius would
+    place every single-beam post 0.21 radius too far)."""
     mx, my = float(px.mean()), float(py.mean())
     d = math.hypot(mx, my)
+    if len(px) == 1:
+        push = 0.25 * math.pi * radius
+        return mx + push * mx / d, my + push * my / d
     cx, cy = mx + radius * mx / d, my + radius * my / d  # surface point pushed back by r
     for _ in range(5):  # Gauss-Newton on sum (|p - c| - r)^2
         ex, ey = cx - px, cy - py

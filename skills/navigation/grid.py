@@ -23,6 +23,7 @@ from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
 __all__ = [
     "CostMap",
     "MapFile",
+    "MapReflector",
     "cell_to_world",
     "inflate",
     "load_map",
@@ -56,11 +57,26 @@ def cell_to_world(grid: OccupancyGrid, row: int, col: int) -> tuple[float, float
 
 
 @dataclass(frozen=True)
+class MapReflector:
+    """A laser-reflector post of the map (an mmexec key of the map YAML, which map_server
+    ignores): ``name``, centre ``position`` ``[x, y]`` in ``map`` [m], post ``radius`` [m].
+    Read with :func:`mmexec.skills.localization.landmarks.load_reflectors`."""
+
+    name: str
+    position: tuple[float, float]
+    radius: float
+
+    def validate(self) -> list[str]:
+        return [] if self.radius > 0 else [f"reflector {self.name!r}: radius must be > 0 m, got {self.radius}"]
+
+
+@dataclass(frozen=True)
 class MapFile:
     """A map_server map description (the YAML next to the PGM).
 
     ``origin`` is ``[x, y, yaw]`` of the lower-left pixel's corner in ``map`` [m, m, rad];
-    ``resolution`` [m/pixel]; thresholds are occupancy probabilities in [0, 1].
+    ``resolution`` [m/pixel]; thresholds are occupancy probabilities in [0, 1];
+    ``reflectors``: the laser-reflector landmarks, if the map has any.
     """
 
     image: str
@@ -70,6 +86,7 @@ class MapFile:
     occupied_thresh: float = 0.65
     free_thresh: float = 0.196
     mode: Literal["trinary", "scale"] = "trinary"
+    reflectors: tuple[MapReflector, ...] = ()
 
     def validate(self) -> list[str]:
         errs = []

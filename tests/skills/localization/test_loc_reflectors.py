@@ -57,6 +57,25 @@ def test_extraction_finds_each_visible_post_centre_within_a_centimetre():
         assert np.min(np.hypot(*(POSTS - f).T)) < 0.01
 
 
+def test_a_post_under_a_single_beam_is_placed_behind_the_hit_without_bias():
+    """A post narrower than a beam spacing shows in one beam; its centre is put pi/4 of the
+    radius behind the hit, the mean depth under a beam crossing it at a random offset."""
+    d, r = 5.0, 0.025
+    offsets = np.linspace(-r, r, 201)[1:-1]  # lateral offset of the beam from the centre
+    found = []
+    for b in offsets:
+        hit = d - math.sqrt(r * r - b * b)  # range to the surface along a beam at offset b
+        ang = math.asin(b / d)
+        dets = extract_reflectors(np.array([hit, 3.0]), np.array([ang, 1.0]), np.array([1.0, 0.2]),
+                                  ReflectorConfig(post_radius=r))
+        assert len(dets) == 1 and dets[0].beams == 1
+        found.append((dets[0].x - d * math.cos(ang), dets[0].y))
+    err = np.array(found)
+    assert abs(err[:, 0].mean()) < 0.002  # unbiased along the beam (a full radius: +5.4 mm)
+    assert np.abs(err).max() < r
+    assert extract_reflectors(np.array([5.0]), np.array([0.0]), np.array([1.0]), ReflectorConfig(min_beams=2)) == []
+
+
 def test_a_run_across_the_scan_seam_is_one_reflector():
     angles = -math.pi + np.arange(8) * (2 * math.pi / 8)
     ranges = np.full(8, 2.0)
