@@ -2,35 +2,45 @@
 
 Per control tick (:meth:`DwaPlanner.step`):
 
-1. **Dynamic window**: the ``(v, w)`` reachable within the tick ``dt`` from the current
-   command under the base's velocity and acceleration limits
+1. **Dynamic window**: velocities reachable from the current command ``(v0, w0)`` under
+   the base's velocity and acceleration limits
    (:meth:`mmexec.skills.navigation.limits.BaseLimits.window`), the forward speed also
-   capped near people (the social speed scale) and so the base can stop at the goal
-   (``v <= sqrt(2 a d)`` over the remaining path length ``d``). It is sampled on an
-   ``n_v x n_w`` grid (with ``w = 0`` exactly when inside).
-2. **Rollouts**: each sample is held for ``horizon`` seconds; the unicycle's arc is
-   evaluated in closed form at every ``step`` (all rollouts and times in one array).
+   capped by the caller (e.g. the social speed scale near people) and so the base can
+   stop at the goal (``v <= sqrt(2 a d)`` over the remaining path length ``d``). Target
+   velocities are sampled on an ``n_v x n_w`` grid over what is reachable within
+   ``window_time`` (with ``w = 0`` exactly when inside); the command sent is the first
+   tick of the chosen ramp, so it always lies in the window of the tick ``dt``. (With a
+   window of one 50 ms tick a base at rest sees only rollouts of a few centimetres, and
+   the clearance term can then keep it from ever starting.)
+2. **Rollouts**: each rollout ramps from ``(v0, w0)`` to its target at the full
+   accelerations, then holds it for the rest of ``horizon``; poses at every ``step``, all
+   rollouts and times in one array (:func:`rollouts`).
 3. **Admissibility** (Fox et al.): a rollout that hits something (the costmap clearance
    under the robot radius, or a circle's safety radius with the circle moved at its
-   tracked velocity) is kept only if the base can brake to a stop before that time
-   (``|v| t_hit >= v^2 / (2 a)``). A start already inside an obstacle's zone does not
-   condemn every rollout: a rollout collides only where it gets closer than at the start.
+   tracked velocity) is kept only if the base can brake to a stop before the hit (the
+   distance covered before it at least ``v^2 / (2 a)``). A start already inside an
+   obstacle's zone does not condemn every rollout: a rollout collides only where it gets
+   closer to that obstacle than at the start.
 4. **Scoring** (lower is better; each term is dimensionless), with the rollout's end
    point projected on the path: ``path``: its distance to the path / ``path_scale``;
    ``heading``: the angle between its heading and the direction to the path point
    ``lookahead`` metres beyond its projection, / pi; ``goal``: minus the progress along
-   the path (projection's arc length gained) / (max_v * horizon); ``clearance``: ``1 - min(gap / clearance_scale, 1)`` with the smallest gap
-   along the rollout, or ``3 - 2 t_hit / horizon`` for an admissible rollout that hits
-   (it may still brake in time, but it heads for a collision); ``speed``: ``1 - v / max_v``; ``social``: the largest social cost
-   along the rollout, people moved at their velocity.
+   the path (the projection's arc length gained) / (max_v * horizon); ``clearance``:
+   ``1 - min(gap / clearance_scale, 1)`` with the smallest gap along the rollout, or
+   ``3 - 2 t_hit / horizon`` for an admissible rollout that hits (it may still brake in
+   time, but it heads for a collision); ``speed``: ``1 - v / max_v``; ``social``: the
+   largest social cost along the rollout, people moved at their velocity.
 
 Outcomes for the caller (:class:`DwaStatus`): ``GOAL_REACHED``; ``NO_TRAJECTORY`` (no
 admissible rollout: the command brakes); ``STUCK`` (the path progress has not improved by
 ``stuck_progress`` for ``stuck_time`` seconds: the caller recovers: rotate, back off,
-re-plan). Independently, ``path_blocked`` reports an obstacle (a costmap cell closer to
-the path than the robot radius, people excepted: they move) on the next
-``blocked_lookahead`` metres of path, so the caller re-plans globally on
-:meth:`mmexec.skills.navigation.costmap.RollingCostmap.merged_grid`.
+re-plan). Independently, ``path_blocked`` reports an obstacle on the next
+``blocked_lookahead`` metres of path (a costmap obstacle closer than the robot radius,
+or a circle's safety zone; people excepted: they move on), so the caller re-plans
+globally (:meth:`mmexec.skills.navigation.local_planner.LocalPlanner.replan_grid`).
+A DWA that follows a path holds to it: an obstacle that intrudes on the path is passed
+only as far as the path and clearance terms allow, and otherwise the base slows and
+stops in front of it; going round is the re-plan's job.
 
 Frames: ``map``; m, rad, s. The planner never reads a clock: the caller passes ``now``.
 """

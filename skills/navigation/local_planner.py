@@ -7,14 +7,16 @@ tick (it never blocks, never reads a clock and never talks to a device):
    costmap's clearing and marking (which also says which hits are not the static map),
    clusters and circles of those hits, and the tracker (velocities, people);
 2. the social speed scale from the nearest person caps the forward speed;
-3. the DWA picks ``u_ref`` on the costmap, with people's circles moved at their tracked
-   velocity over the horizon (static circles are already marks in the costmap);
+3. the DWA picks ``u_ref`` on the costmap and the circles, their safety radii grown by the
+   filter's look-ahead ``l`` (the zone the filter guards; a DWA that planned into it
+   would only be stopped by the filter), people moved at their tracked velocity;
 4. the CLF-CBF filter makes ``u_ref`` safe against *every* circle, tracking the pose the
    DWA's rollout reaches ``reference_time`` seconds ahead.
 
 The caller acts on the DWA status and ``path_blocked`` (re-plan globally on
-:meth:`~mmexec.skills.navigation.costmap.RollingCostmap.merged_grid`; recover when
-``STUCK``). Frames: ``map``; m, rad, s.
+:meth:`LocalPlanner.replan_grid`; recover when ``STUCK``).
+:func:`mmexec.skills.navigation.synthetic.run_closed_loop` shows the whole loop.
+Frames: ``map``; m, rad, s.
 """
 
 from __future__ import annotations

@@ -116,8 +116,9 @@ class ClosedLoopRecord:
     """What one closed-loop run did: ``reached`` the goal after ``time`` [s] of simulated
     clock in ``ticks``; the smallest gap [m] (centre distance minus both radii) to any
     pole and to the walker over the run; ``replans`` (on a blocked path); ``filtered``
-    ticks where the filter changed the DWA command; ``infeasible`` ticks; the final
-    DWA ``status``."""
+    ticks where the filter changed the DWA command (the CLF's pull included),
+    ``barrier_active`` ticks where a barrier constraint bound, ``infeasible`` ticks (the
+    filter braked); the final DWA ``status``."""
 
     reached: bool
     time: float
@@ -126,6 +127,7 @@ class ClosedLoopRecord:
     min_person_gap: float
     replans: int
     filtered: int
+    barrier_active: int
     infeasible: int
     status: str
 
@@ -155,12 +157,13 @@ def run_closed_loop(grid: OccupancyGrid, start: Pose2D, goal: tuple[float, float
     pose, v, w, t = start, 0.0, 0.0, 0.0
     t_walk: float | None = None if walker is None or walker.trigger_x is not None else 0.0
     min_pole = min_person = math.inf
-    replans = filtered = infeasible = ticks = 0
+    replans = filtered = active = infeasible = ticks = 0
     last_replan = -math.inf
     status = "ok"
 
     def record(reached: bool) -> ClosedLoopRecord:
-        return ClosedLoopRecord(reached, t, ticks, min_pole, min_person, replans, filtered, infeasible, status)
+        return ClosedLoopRecord(reached, t, ticks, min_pole, min_person, replans, filtered, active, infeasible,
+                                status)
 
     while t < t_max:
         centres, radii = np.asarray(poles, dtype=float).reshape(-1, 2), np.asarray(pole_radii, dtype=float)
@@ -177,6 +180,7 @@ def run_closed_loop(grid: OccupancyGrid, start: Pose2D, goal: tuple[float, float
         status = cmd.status.value
         if cmd.cbf is not None:
             filtered += abs(cmd.cbf.v - cmd.dwa.v) > 1e-6 or abs(cmd.cbf.w - cmd.dwa.w) > 1e-6
+            active += bool(cmd.cbf.active.any())
             infeasible += cmd.cbf.status is QpStatus.INFEASIBLE
         if cmd.path_blocked and t - last_replan >= replan_every:
             path = plan(planner.replan_grid(t), (pose.x, pose.y))

@@ -147,6 +147,9 @@ class ObstacleTracker:
             moving[ti] = np.where(fast, moving[ti] + 1, 0)
         travelled = np.hypot(*(pos - self._born).T) >= cfg.min_travel
         person = self._person | ((moving >= cfg.confirm) & travelled & (radius <= cfg.person_radius))
+        became = person & ~self._person
+        if became.any():
+            log.debug("tracks %s classified as people", self._ids[became].tolist())
         alive = stamp - seen <= cfg.max_age
         new = np.ones(detections.centres.shape[0], dtype=bool)
         new[di] = False
@@ -161,9 +164,6 @@ class ObstacleTracker:
         self._ids = np.concatenate([self._ids[alive], ids_new])
         self._seen = np.concatenate([seen[alive], np.full(n_new, stamp)])
         self._moving = np.concatenate([moving[alive], np.zeros(n_new, dtype=np.int64)])
-        became = person & ~self._person
-        if became.any():
-            log.debug("tracks %s classified as people", self._ids[became].tolist())
         self._person = np.concatenate([person[alive], np.zeros(n_new, dtype=bool)])
         return self.circles()
 

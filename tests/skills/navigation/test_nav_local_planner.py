@@ -38,7 +38,7 @@ def test_dwa_and_cbf_reach_the_goal_keeping_every_barrier():
     # the person: the gap beyond both radii never fell below the margin
     assert rec.min_pole_gap >= MARGIN, rec
     assert rec.min_person_gap >= MARGIN, rec
-    assert rec.filtered > 0 and rec.replans >= 1, rec
+    assert rec.barrier_active > 0 and rec.replans >= 1, rec
 
 
 def test_without_the_filter_the_dwa_breaks_a_barrier():

@@ -29,6 +29,27 @@ def test_constant_velocity_is_estimated_and_becomes_a_person():
     np.testing.assert_allclose(out.centres[0], [1.0, 2.0] + vel * 39 * dt, atol=0.03)
 
 
+def _walk_until_person(trk, extra=lambda k: []):
+    """Feed a person walking at 0.6 m/s (plus ``extra(k)`` detections) until it is
+    confirmed; returns the tick k of that update and its output."""
+    for k in range(60):
+        out = trk.update(_det([[0.6 * k * 0.1, 0.0], *extra(k)]), k * 0.1)
+        if out.person.any():
+            return k, out
+    raise AssertionError("never confirmed")
+
+
+def test_a_person_confirmed_while_tracks_come_and_go(caplog):
+    """The update that confirms a person also starts two tracks and drops one."""
+    kc, _ = _walk_until_person(ObstacleTracker(TrackingConfig(max_age=0.25)))
+    caplog.set_level("DEBUG", logger="mmexec.skills.navigation.tracks")
+    # a chair last seen 0.3 s before kc (expires at kc), two new posts appearing at kc
+    extra = lambda k: ([[5.0, 5.0]] if k <= kc - 3 else []) + ([[-3.0, 2.0], [-3.0, -2.0]] if k >= kc else [])
+    k, out = _walk_until_person(ObstacleTracker(TrackingConfig(max_age=0.25)), extra)
+    assert k == kc and out.person.sum() == 1 and len(out) == 3
+    assert "classified as people" in caplog.text
+
+
 def test_furniture_with_a_wandering_centroid_stays_furniture():
     """A chair whose visible side changes: the centroid jumps by up to 10 cm between scans
     (speeds well over moving_speed for a few scans) but never leaves the chair."""
