@@ -152,6 +152,7 @@ def simplify_path(costmap: CostMap, path: list[tuple[float, float]]) -> list[tup
             a = path[i]
             if i == 0 and not costmap.is_free(*a):
                 # shortcut from a start in the inflation only along the planned first step
+                j = i + 1
                 break
             if line_is_free(costmap, a, path[j]):
                 break

@@ -102,6 +102,24 @@ def test_simplify_keeps_path_free_and_shortens():
     assert path_length(simple) <= path_length(path) + 1e-9
 
 
+def test_simplify_from_a_start_in_the_inflation_keeps_the_planned_first_step():
+    # A start inside the inflated zone (the robot stopped close to a wall): the path leaves
+    # along its planned first step; the shortcut from the start straight to the goal would
+    # cross the wall (it did: the inner loop broke with the goal still chosen).
+    data = np.zeros((40, 40), dtype=np.int8)
+    data[0:30, 18:22] = 100
+    cm = inflate(OccupancyGrid(data, 0.05), 0.15)
+    start = (0.78, 1.0)  # 0.12 m from the wall's face: inside the 0.15 m inflation
+    assert not cm.is_free(*start)
+    path = plan_path(cm, start, (1.4, 1.0))
+    assert path is not None
+    simple = simplify_path(cm, path)
+    assert simple[0] == path[0] and simple[-1] == path[-1]
+    assert simple[1] == path[1]
+    for a, b in itertools.pairwise(simple[1:]):
+        assert line_is_free(cm, a, b)
+
+
 def test_100x80_grid_is_fast():
     rng = np.random.default_rng(0)
     data = np.zeros((80, 100), dtype=np.int8)
