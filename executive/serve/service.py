@@ -37,11 +37,11 @@ import queue
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from mmexec.drivers.interfaces import Robot
+from mmexec.drivers.interfaces import CameraFrame, LaserScan, Robot
 from mmexec.executive.eventlog import to_jsonable
 from mmexec.executive.runner import RequestResult, Runner, RunOptions
 from mmexec.executive.serve.prompts import PromptBoard
@@ -443,6 +443,38 @@ class Service:
 # --------------------------------------------------------------------------- the tick loop
 
 
+class _Tap:
+    """Stands in for a robot's camera or lidar on a stepped clock: skills use it as the
+    device (every attribute is the device's), and the streams show only what the skills
+    last read. Reading the device for the stream would change a seeded run: the
+    simulator's sensor noise draws from the run's random stream, and a mock's faults
+    count reads."""
+
+    def __init__(self, device: Any) -> None:
+        self._device = device
+        self.latest: Any = None
+        self.reads = 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._device, name)
+
+    def _keep(self, value: Any) -> Any:
+        if value is not None:
+            self.latest = value
+            self.reads += 1
+        return value
+
+
+class _CameraTap(_Tap):
+    def frame(self) -> CameraFrame | None:
+        return self._keep(self._device.frame())  # type: ignore[no-any-return]
+
+
+class _LidarTap(_Tap):
+    def scan(self) -> LaserScan | None:
+        return self._keep(self._device.scan())  # type: ignore[no-any-return]
+
+
 def _finite_or_none(values: Iterable[float]) -> list[float | None]:
     return [float(x) if math.isfinite(x) else None for x in values]
 
@@ -462,6 +494,8 @@ class ServeRunner(Runner):
         self._last_path: Any = None
         self._period = 0.05
         self._request_id = 0  # the service id of the request being served
+        self._taps: dict[str, _Tap] = {}  # stepped clock: what the skills read, by topic
+        self._shown: dict[str, int] = {}  # the tap's read count last streamed
         self.add_log_listener(self._on_record)
         self.add_tick_hook(self._between_ticks)
 
@@ -529,6 +563,12 @@ class ServeRunner(Runner):
         rate = self.options.rate_hz if self.options.rate_hz is not None else self.config.config.rate_hz
         self._period = 1.0 / rate
         self.service.info.update(backend=self.config.backend, log=str(self.log_path))
+        robot = self.robot
+        if robot.clock.stepped:  # stream what the skills read, never read for the stream
+            if robot.camera is not None:
+                robot.camera = self._taps.setdefault("camera", _CameraTap(robot.camera))  # type: ignore[assignment]
+            if robot.lidar is not None:
+                robot.lidar = self._taps.setdefault("scan", _LidarTap(robot.lidar))  # type: ignore[assignment]
         grid = self.robot.occupancy
         if grid is not None:
             self.service.hub.publish("map", {
@@ -593,14 +633,14 @@ class ServeRunner(Runner):
         if path is not self._last_path:
             self._last_path = path
             hub.publish("path", {"t": robot.clock.now(), "points": [[float(x), float(y)] for x, y in path or []]})
-        if robot.lidar is not None and self._is_due("scan", s.scan_hz) and hub.wants("scan"):
-            scan = robot.lidar.scan()
+        if robot.lidar is not None and hub.wants("scan") and self._is_due("scan", s.scan_hz):
+            scan = self._sensor("scan", robot.lidar.scan)
             if scan is not None:
                 hub.publish("scan", {"t": scan.stamp, "angle_min": scan.angle_min,
                                      "angle_increment": scan.angle_increment, "range_min": scan.range_min,
                                      "range_max": scan.range_max, "ranges": _finite_or_none(scan.ranges)})
-        if robot.camera is not None and self._is_due("camera", s.camera_hz) and hub.wants("camera"):
-            frame = robot.camera.frame()
+        if robot.camera is not None and hub.wants("camera") and self._is_due("camera", s.camera_hz):
+            frame = self._sensor("camera", robot.camera.frame)
             if frame is not None:
                 import cv2
 
@@ -609,6 +649,17 @@ class ServeRunner(Runner):
                     h, w = frame.rgb.shape[:2]
                     hub.publish("camera", {"t": frame.stamp, "width": int(w), "height": int(h),
                                            "jpeg": base64.b64encode(bytes(buf)).decode("ascii")})
+
+    def _sensor(self, topic: str, read: Callable[[], Any]) -> Any:
+        """The reading to stream: on a stepped clock the newest one a skill got (None
+        when nothing new), on a wall clock a fresh ``read()``."""
+        tap = self._taps.get(topic)
+        if tap is None:
+            return read()
+        if tap.reads == self._shown.get(topic, 0):
+            return None
+        self._shown[topic] = tap.reads
+        return tap.latest
 
     def _tip(self) -> str:
         running = [p for p in self.tree.order if self.tree.status.get(p) == "RUNNING"]

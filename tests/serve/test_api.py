@@ -285,19 +285,41 @@ def test_stream_events_tree_status_pose_and_scan(live: Any) -> None:
     assert first["nodes"][1]["parent"] == first["nodes"][0]["path"]
     final = {n["path"]: n["status"] for n in trees[-1]["nodes"]}
     assert set(final.values()) == {"SUCCESS"}
-    with c.websocket_connect("/api/stream?topics=pose,scan,camera") as ws:
+    with c.websocket_connect("/api/stream?topics=pose,scan") as ws:
         ws.receive_json()
-        got = _messages(ws, lambda m: m["type"] == "camera")
-        pose = next(m for m in got if m["type"] == "pose")["data"]
-        assert {"x", "y", "theta", "v", "w", "t"} <= set(pose)
+        svc.runner.add_tick_hook(lambda robot, period: robot.lidar.scan())  # as a skill reading the lidar
         c.post("/api/requests", json={"item": 6})
-        got += _messages(ws, lambda m: m["type"] == "scan")
+        got = _messages(ws, lambda m: m["type"] == "scan")
+    pose = next(m for m in got if m["type"] == "pose")["data"]
+    assert {"x", "y", "theta", "v", "w", "t"} <= set(pose)
     scan = next(m for m in got if m["type"] == "scan")["data"]
     assert len(scan["ranges"]) > 0 and scan["angle_increment"] > 0
-    cam = next(m for m in got if m["type"] == "camera")["data"]
-    jpeg = base64.b64decode(cam["jpeg"])
-    assert jpeg[:2] == b"\xff\xd8" and (cam["width"], cam["height"]) == (64, 48)
-    assert {m["type"] for m in got} <= {"pose", "scan", "camera"}
+    assert {m["type"] for m in got} <= {"pose", "scan"}
+
+
+def test_camera_stream_shows_what_the_skills_read(live: Any, serve_config: Any) -> None:
+    """On a stepped clock the stream never reads a sensor itself: the mock camera's 2nd
+    read drops out whether or not a client watches, so request 2's prompt fails."""
+    config = serve_config("")
+    config.write_text(config.read_text().replace("  capabilities: [base, arm, gripper, camera, lidar]\n",
+                                                 "  capabilities: [base, arm, gripper, camera, lidar]\n"
+                                                 "  camera: {dropouts: [2]}\n"))
+    svc = live("ask_point", config=config)
+    c = svc.client
+    with c.websocket_connect("/api/stream?topics=camera,prompt") as ws:
+        ws.receive_json()
+        first = c.post("/api/requests", json={"item": 1}).json()["id"]
+        got = _messages(ws, lambda m: m["type"] == "camera")
+        prompt = next(m for m in got if m["type"] == "prompt")["data"]
+        cam = next(m for m in got if m["type"] == "camera")["data"]
+        assert base64.b64decode(cam["jpeg"])[:2] == b"\xff\xd8" and (cam["width"], cam["height"]) == (64, 48)
+        t0 = c.get("/api/status").json()["t"]  # ticks pass while the prompt waits: the stream reads nothing
+        svc.wait(lambda: c.get("/api/status").json()["t"] > t0 + 0.3, "ticks while the prompt waits")
+        c.post(f"/api/prompts/{prompt['id']}/answer", json={"answer": [1, 1]})
+        assert svc.finished(first)["state"] == "success"
+        second = c.post("/api/requests", json={"item": 2}).json()["id"]
+        end = svc.finished(second)
+    assert end["state"] == "failure" and end["reason"] == "ask_operator: the camera has no frame to show"
 
 
 def test_stream_unknown_topic(live: Any) -> None:
