@@ -300,3 +300,48 @@ def test_terminal_operator_reads_without_blocking(tmp_path: Path) -> None:
     with pytest.raises(AnswerError, match="the terminal's input ended before prompt p10 was answered"):
         term.poll("p10", 0.0)
     os.close(read_fd)
+
+
+def test_run_asks_on_the_terminal(tmp_path: Path) -> None:
+    """``mmexec run`` with a terminal on stdin: the question on stderr, the typed answer
+    read between ticks (a wrong one explained), the request done."""
+    import pty
+    import select
+    import time
+
+    master, slave = pty.openpty()
+    exe = Path(sys.executable).with_name("mmexec")
+    proc = subprocess.Popen([str(exe), "run", str(ROOT / "tests" / "serve" / "missions" / "ask_confirm.yaml"),
+                             "--config", str(ROOT / "config" / "mock.yaml"), "--request", "item=5", "--log",
+                             "run.jsonl"], cwd=tmp_path, stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    os.close(slave)
+    err = b""
+    try:
+        assert proc.stderr is not None
+        deadline = time.monotonic() + 120
+        while b"answer y or n" not in err:
+            ready, _, _ = select.select([proc.stderr], [], [], max(0.0, deadline - time.monotonic()))
+            assert ready, f"no prompt on stderr: {err!r}"
+            chunk = os.read(proc.stderr.fileno(), 4096)
+            assert chunk, f"exited before the prompt: {err!r}"
+            err += chunk
+        os.write(master, b"perhaps\n")
+        while b"got 'perhaps'" not in err:
+            ready, _, _ = select.select([proc.stderr], [], [], max(0.0, deadline - time.monotonic()))
+            assert ready, f"no explanation on stderr: {err!r}"
+            err += os.read(proc.stderr.fileno(), 4096)
+        os.write(master, b"y\n")
+        assert proc.wait(120) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        os.close(master)
+        for stream in (proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()
+    assert b"operator: grasp item 5?" in err
+    from mmexec.executive.eventlog import read_log
+
+    answer = [r for r in read_log(tmp_path / "run.jsonl") if r["event"] == "operator_answer"]
+    assert [(a["answer"], a["source"]) for a in answer] == [(True, "terminal")]
