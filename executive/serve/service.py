@@ -74,7 +74,7 @@ IDLE_WAIT = 0.1
 STREAM_JPEG_QUALITY = 70
 #: [wall Hz] how often the status is streamed while nothing else changes it
 STATUS_HZ = 2.0
-_STICKY = ("status", "tree", "map", "pose", "path")
+_STICKY = ("status", "map", "pose", "path")
 
 
 class ServiceError(Exception):
@@ -125,17 +125,21 @@ class Hub:
     """Fan-out of stream messages from any thread to WebSocket clients, each with its own
     bounded queue in its event loop (a slow client loses messages, counted in
     ``dropped``, and never slows the tick). The last message of each sticky topic
-    (status, tree, map, pose, path) is kept and sent first to a new client."""
+    (status, map, pose, path) is kept and sent first to a new client; the tick loop sends
+    it the current tree (:attr:`joined` counts attachments)."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._clients: list[_Client] = []
         self._latest: dict[str, str] = {}
+        #: clients attached so far (the tick loop sends a new one the current tree)
+        self.joined = 0
 
     def attach(self, loop: asyncio.AbstractEventLoop, topics: Iterable[str]) -> _Client:
         client = _Client(loop, frozenset(topics))
         with self._lock:
             self._clients.append(client)
+            self.joined += 1
             for topic, text in self._latest.items():
                 if topic in client.topics:
                     client.offer(text)
@@ -155,10 +159,13 @@ class Hub:
         """Send ``{"type": topic, "data": data}`` to the clients of ``topic`` (any thread).
         ``data`` is made plain JSON first (a NaN becomes a string), except event records,
         which the event log made so already."""
+        sticky = topic in _STICKY
+        if not sticky and not self.wants(topic):
+            return  # nobody to tell, nothing to keep: no encoding on the tick thread
         payload = data if topic == "event" else to_jsonable(data)
         text = json.dumps({"type": topic, "data": payload}, separators=(",", ":"), allow_nan=False)
         with self._lock:
-            if topic in _STICKY:
+            if sticky:
                 self._latest[topic] = text
             clients = [c for c in self._clients if topic in c.topics]
         for c in clients:
@@ -496,6 +503,7 @@ class ServeRunner(Runner):
         self._request_id = 0  # the service id of the request being served
         self._taps: dict[str, _Tap] = {}  # stepped clock: what the skills read, by topic
         self._shown: dict[str, int] = {}  # the tap's read count last streamed
+        self._joined = 0  # stream clients seen so far
         self.add_log_listener(self._on_record)
         self.add_tick_hook(self._between_ticks)
 
@@ -608,10 +616,10 @@ class ServeRunner(Runner):
     def _on_record(self, record: dict[str, Any]) -> None:
         hub = self.service.hub
         ev = record.get("event")
-        if ev == "request_end" and self.tree.changed:  # the final statuses before the end
+        if ev == "request_end" and self.tree.changed and hub.wants("tree"):  # the final statuses first
             hub.publish("tree", self.tree.snapshot())
         hub.publish("event", record)
-        if self.tree.feed(record) and ev == "request_start":
+        if self.tree.feed(record) and ev == "request_start" and hub.wants("tree"):
             hub.publish("tree", self.tree.snapshot())
 
     def _publish_status(self) -> None:
@@ -619,9 +627,14 @@ class ServeRunner(Runner):
 
     def _publish(self, robot: Robot) -> None:
         hub = self.service.hub
-        if self.tree.changed:
+        joined = hub.joined != self._joined  # a new client gets the whole tree as it is now
+        self._joined = hub.joined
+        if self.tree.changed or (joined and self.tree.order):
             self.service.set_state(self.service.state, tip=self._tip())
-            hub.publish("tree", self.tree.snapshot())
+            if hub.wants("tree"):
+                hub.publish("tree", self.tree.snapshot())
+            else:
+                self.tree.changed = set()
         s = self.service.settings
         if self._is_due("status", STATUS_HZ):
             self._publish_status()

@@ -330,3 +330,17 @@ def test_stream_unknown_topic(live: Any) -> None:
         assert msg["data"]["error"].startswith("/api/stream: unknown topic 'bogus'")
         with pytest.raises(WebSocketDisconnect):
             ws.receive_json()
+
+
+def test_a_client_joining_mid_request_gets_the_tree(live: Any) -> None:
+    svc = live("ask_confirm")
+    c = svc.client
+    rid = c.post("/api/requests", json={"item": 1}).json()["id"]
+    svc.prompt()
+    with c.websocket_connect("/api/stream?topics=tree,status") as ws:
+        assert ws.receive_json()["type"] == "hello"
+        tree = _messages(ws, lambda m: m["type"] == "tree")[-1]["data"]
+    assert tree["request"] == rid
+    status = {n["path"]: n["status"] for n in tree["nodes"]}
+    assert status["ask_confirm/confirm"] == "RUNNING" and status["ask_confirm/report"] == "INVALID"
+    assert c.get("/api/status").json()["tip"] == "ask_confirm/confirm"
