@@ -252,7 +252,7 @@ class Service:
         self.counts = {"accepted": 0, "served": 0, "succeeded": 0, "failed": 0, "dropped": 0}
         self.t = 0.0
         self.tip = ""
-        self.info: dict[str, Any] = {}
+        self.info: dict[str, Any] = {}  # mission, backend, log: see set_info
 
     def configure(self, mission: Any, settings: ServeSettings) -> None:
         """Set the mission requests are checked against and the settings (before serving)."""
@@ -433,6 +433,11 @@ class Service:
                 self._drop(self._queue.popleft(), reason)
             self.stopping = True
 
+    def set_info(self, **fields: Any) -> None:
+        """Identity fields shown in the status (mission, backend, log path)."""
+        with self._lock:
+            self.info = {**self.info, **fields}
+
     def set_state(self, state: str, t: float | None = None, tip: str | None = None) -> None:
         with self._lock:
             self.state = state
@@ -513,7 +518,7 @@ class ServeRunner(Runner):
         assert self.config is not None
         settings = parse_section(self.config.config.serve, self.config.mark("serve"))
         self.service.configure(self.mission, settings)
-        self.service.info.update(mission=getattr(self.mission, "name", ""), backend=self.config.backend)
+        self.service.set_info(mission=getattr(self.mission, "name", ""), backend=self.config.backend)
 
     def say(self, line: str) -> None:
         """One line for the operator on the run's console (escaped; a console gone away is
@@ -570,7 +575,7 @@ class ServeRunner(Runner):
         assert self.robot is not None and self.config is not None and self.log is not None
         rate = self.options.rate_hz if self.options.rate_hz is not None else self.config.config.rate_hz
         self._period = 1.0 / rate
-        self.service.info.update(backend=self.config.backend, log=str(self.log_path))
+        self.service.set_info(backend=self.config.backend, log=str(self.log_path))
         robot = self.robot
         if robot.clock.stepped:  # stream what the skills read, never read for the stream
             if robot.camera is not None:
