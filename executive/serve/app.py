@@ -82,7 +82,10 @@ class Guard:
         if kind == "http":
             headers = dict(scope.get("headers") or [])
             declared = headers.get(b"content-length")
-            if declared is not None and (not declared.isdigit() or int(declared) > self.max_body):
+            if declared is not None and not declared.isdigit():
+                await _send_error(send, 400, f"{scope['method']} {scope['path']}: Content-Length is not a number")
+                return
+            if declared is not None and int(declared) > self.max_body:
                 await _send_error(send, 413, f"{scope['method']} {scope['path']}: body over {self.max_body} bytes")
                 return
             chunks: list[bytes] = []
