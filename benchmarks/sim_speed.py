@@ -23,6 +23,7 @@ from typing import Any
 import pybullet as p
 
 from mmexec.config.yamlload import InputError, YDict, load_yaml, load_yaml_text
+from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.sim.backend import SimRobot, build
 
@@ -74,8 +75,7 @@ def drive(r: SimRobot, rate: float, period: float = 0.1) -> tuple[float, float, 
         if math.hypot(gx - pose.x, gy - pose.y) < 0.1:
             leg += 1
             continue
-        err = math.atan2(gy - pose.y, gx - pose.x) - pose.theta
-        err = (err + math.pi) % (2 * math.pi) - math.pi
+        err = wrap_angle(math.atan2(gy - pose.y, gx - pose.x) - pose.theta)
         r.base.set_velocity(0.5 if abs(err) < 0.5 else 0.0, max(-2.0, min(2.0, 3.0 * err)))
         r.spin(period)
         if k % frame_every == 0:

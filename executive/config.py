@@ -92,8 +92,13 @@ _OPTION_FLAGS: dict[str, tuple[str, str]] = {
 #: Capability attribute names of :class:`~mmexec.drivers.interfaces.Robot`.
 CAPABILITIES: tuple[str, ...] = ("base", "arm", "gripper", "camera", "lidar")
 
-#: Modules that define the built-in skills, imported before any user module.
-BUILTIN_SKILL_MODULES: tuple[str, ...] = ("mmexec.skills.primitives", "mmexec.skills.operator", "mmexec.skills.fetch")
+#: Modules that define the built-in skills, imported before any user module: the
+#: primitives, operator prompts, the general skill library, the fetch mission's own.
+BUILTIN_SKILL_MODULES: tuple[str, ...] = (
+    "mmexec.skills.primitives", "mmexec.skills.operator", "mmexec.skills.navigation.navigate",
+    "mmexec.skills.navigation.approach", "mmexec.skills.search", "mmexec.skills.perception.detect",
+    "mmexec.skills.manipulation.arm", "mmexec.skills.fetch",
+)
 
 
 #: Tick rates a config or ``--rate`` may ask for [Hz of clock time].

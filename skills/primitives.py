@@ -1,4 +1,6 @@
-"""Primitive skills: wait, report, move the arm, open / close the gripper, drive, stop.
+"""Primitive skills: wait, report, move the arm, open / close the gripper, drive, stop;
+and the base's motion loop that every skill driving the base runs (:func:`motion_loop`,
+around :func:`brake`).
 
 They talk only to the capability interfaces, never block, and are cancellable at any
 tick: a cancelled arm or gripper move cancels its goal and waits for the backend to
@@ -11,17 +13,20 @@ Robot profile keys read here (all optional):
 
 * ``named_poses``: ``{name: [q1, ..., qn]}`` arm joint poses [rad], for ``move_arm``;
 * ``home``: ``[x, y, theta]`` base pose in ``map`` [m, m, rad], for ``drive_to place=home``;
-* ``places``: ``{name: [x, y, theta]}`` more named base poses in ``map``.
+* ``places``: ``{name: [x, y, theta]}`` more named base poses in ``map``
+
+(looked up through :mod:`mmexec.skills.poses`).
 """
 
 from __future__ import annotations
 
+import enum
 import logging
 import math
-from collections.abc import Generator, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Generator, Sequence
 
-from mmexec.drivers.interfaces import BLIND_FAULTS, Base, Pose2D
+from mmexec.drivers.geometry import wrap_angle
+from mmexec.drivers.interfaces import BLIND_FAULTS, Base, BaseState, Pose2D
 from mmexec.skills.base import (
     FailureKind,
     Output,
@@ -29,14 +34,18 @@ from mmexec.skills.base import (
     SkillCancelled,
     SkillContext,
     SkillFailure,
+    SkillGen,
     skill,
     wait_goal,
 )
+from mmexec.skills.poses import arm_joints, base_pose
 
 __all__ = [
+    "Step",
     "brake",
     "close_gripper",
     "drive_to",
+    "motion_loop",
     "move_arm",
     "open_gripper",
     "report",
@@ -46,17 +55,11 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-Gen = Generator[None, None, "dict[str, Any]"]
-
 #: Below these speeds [m/s, rad/s] a braking base counts as stopped.
 STOPPED_V = 1e-3
 STOPPED_W = 1e-3
 #: Longest a braking base is waited for [clock s] before the skill gives up waiting.
 BRAKE_LIMIT = 3.0
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _require_finite(skill_name: str, **values: float | Sequence[float] | None) -> None:
@@ -75,7 +78,7 @@ def _require_finite(skill_name: str, **values: float | Sequence[float] | None) -
 
 
 @skill("wait", params=[Param("seconds", float, unit="s", required=True, doc="clock time to wait")])
-def wait(ctx: SkillContext, seconds: float) -> Gen:
+def wait(ctx: SkillContext, seconds: float) -> SkillGen:
     """Succeed after ``seconds`` of clock time."""
     _require_finite("wait", seconds=seconds)
     if seconds < 0:
@@ -93,7 +96,7 @@ def wait(ctx: SkillContext, seconds: float) -> Gen:
         Param("level", str, default="info", choices=("info", "warning", "error")),
     ],
 )
-def report(ctx: SkillContext, message: str, level: str = "info") -> Gen:
+def report(ctx: SkillContext, message: str, level: str = "info") -> SkillGen:
     """Write ``message`` to the event log (event ``report``; ``mmexec run`` also prints
     it) and, at debug level, to the Python log; succeed at once."""
     yield from ()
@@ -103,20 +106,6 @@ def report(ctx: SkillContext, message: str, level: str = "info") -> Gen:
 
 
 # --------------------------------------------------------------------------- arm
-
-
-def _named_pose(profile: Mapping[str, Any], name: str) -> list[float]:
-    poses = profile.get("named_poses") or {}
-    if not isinstance(poses, Mapping) or name not in poses:
-        known = sorted(poses) if isinstance(poses, Mapping) else []
-        raise SkillFailure(
-            FailureKind.PRECONDITION,
-            f"move_arm: no named pose {name!r} in the robot profile (known: {', '.join(known) or 'none'})",
-        )
-    q = poses[name]
-    if not isinstance(q, Sequence) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in q):
-        raise SkillFailure(FailureKind.PRECONDITION, f"move_arm: profile pose {name!r} is not a list of numbers")
-    return [float(x) for x in q]
 
 
 @skill(
@@ -136,7 +125,7 @@ def move_arm(
     joints: list[float] | None = None,
     speed_scale: float = 0.5,
     timeout: float | None = None,
-) -> Gen:
+) -> SkillGen:
     """Move the arm in joint space to a named pose or an explicit joint vector [rad]."""
     arm = ctx.robot.arm
     assert arm is not None  # guaranteed by needs=("arm",)
@@ -148,7 +137,7 @@ def move_arm(
         q = [float(x) for x in joints]
     else:
         assert pose is not None
-        q = _named_pose(ctx.profile, pose)
+        q = arm_joints(ctx.profile, pose, "move_arm")
     _require_finite("move_arm", joints=q, speed_scale=speed_scale, timeout=timeout)
     if len(q) != len(arm.joint_names):
         raise SkillFailure(
@@ -180,7 +169,7 @@ def move_arm(
     ],
     needs=("gripper",),
 )
-def open_gripper(ctx: SkillContext, width: float | None = None, speed: float = 0.1, force: float = 50.0) -> Gen:
+def open_gripper(ctx: SkillContext, width: float | None = None, speed: float = 0.1, force: float = 50.0) -> SkillGen:
     """Open the gripper fully, or to ``width`` [m]."""
     gripper = ctx.robot.gripper
     assert gripper is not None
@@ -201,7 +190,7 @@ def open_gripper(ctx: SkillContext, width: float | None = None, speed: float = 0
     outputs=[Output("holding", bool, doc="whether the fingers stopped on an object")],
     needs=("gripper",),
 )
-def close_gripper(ctx: SkillContext, force: float = 50.0, speed: float = 0.1, expect: str = "any") -> Gen:
+def close_gripper(ctx: SkillContext, force: float = 50.0, speed: float = 0.1, expect: str = "any") -> SkillGen:
     """Close the gripper; output ``holding``. ``expect`` turns a wrong result into a
     POSTCONDITION failure."""
     gripper = ctx.robot.gripper
@@ -243,22 +232,54 @@ def brake(ctx: SkillContext, base: Base, limit: float = BRAKE_LIMIT) -> Generato
             continue  # already braking
 
 
-def _place(profile: Mapping[str, Any], name: str) -> Pose2D:
-    if name == "home" and "home" in profile:
-        raw = profile["home"]
-    else:
-        places = profile.get("places") or {}
-        if not isinstance(places, Mapping) or name not in places:
-            known = (["home"] if "home" in profile else []) + (sorted(places) if isinstance(places, Mapping) else [])
-            raise SkillFailure(
-                FailureKind.PRECONDITION,
-                f"drive_to: no place {name!r} in the robot profile (known: {', '.join(known) or 'none'})",
-            )
-        raw = places[name]
-    if (not isinstance(raw, Sequence) or len(raw) != 3
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in raw)):
-        raise SkillFailure(FailureKind.PRECONDITION, f"drive_to: profile place {name!r} is not [x, y, theta]")
-    return Pose2D(float(raw[0]), float(raw[1]), float(raw[2]))
+class Step(enum.Enum):
+    """What a :func:`motion_loop` step returns instead of a velocity command."""
+
+    HOLD = "hold"          # send nothing this tick (the last command stands)
+    ARRIVED = "arrived"    # the motion is done: brake to rest
+
+
+#: ``step(state, now)`` of :func:`motion_loop`: the base's state and the clock time [s]
+#: in, a command (v [m/s], w [rad/s]) or a :class:`Step` out.
+MotionStep = Callable[[BaseState, float], "tuple[float, float] | Step"]
+
+
+def motion_loop(ctx: SkillContext, base: Base, step: MotionStep, *, fault: str, deadline: float | None,
+                timeout: str, timeout_kind: FailureKind = FailureKind.EXECUTION,
+                on_failure: Callable[[str], None] | None = None) -> Generator[None, None, bool]:
+    """Drive ``base`` one tick at a time, braking on every way out: fault -> brake ->
+    fail, timeout -> brake -> fail, cancel -> brake, arrived -> brake.
+
+    Each tick: read the base state; on a fault brake, call ``on_failure("base fault: F,
+    G")`` and fail with EXECUTION "FAULT: F, G" (``fault`` is the message's start); past
+    ``deadline`` [clock s] brake, call ``on_failure("timeout")`` and fail with
+    ``timeout_kind`` and the message ``timeout``; else ``step(state, now)`` gives the
+    command to send, :attr:`Step.HOLD` (none this tick) or :attr:`Step.ARRIVED`: then brake
+    and return whether the base came to rest. Cancellation brakes, then re-raises."""
+    try:
+        while True:
+            st = base.state()
+            if st.faults:
+                yield from brake(ctx, base)
+                faults = ", ".join(sorted(st.faults))
+                if on_failure is not None:
+                    on_failure(f"base fault: {faults}")
+                raise SkillFailure(FailureKind.EXECUTION, f"{fault}: {faults}")
+            now = ctx.clock.now()
+            if deadline is not None and now > deadline:
+                yield from brake(ctx, base)
+                if on_failure is not None:
+                    on_failure("timeout")
+                raise SkillFailure(timeout_kind, timeout)
+            cmd = step(st, now)
+            if cmd is Step.ARRIVED:
+                return (yield from brake(ctx, base))
+            if cmd is not Step.HOLD:
+                base.set_velocity(*cmd)
+            yield
+    except SkillCancelled:
+        yield from brake(ctx, base)
+        raise
 
 
 @skill(
@@ -288,7 +309,7 @@ def drive_to(
     max_linear: float = 0.3,
     max_angular: float = 1.0,
     timeout: float | None = None,
-) -> Gen:
+) -> SkillGen:
     """Drive the base straight to a pose in ``map`` (turn, drive, turn), with no obstacle
     avoidance; path planning is the navigation skill's job. A base fault (bumper, cliff,
     wheel drop) stops the base and fails with EXECUTION."""
@@ -297,7 +318,7 @@ def drive_to(
     if place is not None:
         if x is not None or y is not None or theta is not None:
             raise SkillFailure(FailureKind.PRECONDITION, "drive_to: give either 'place' or x/y/theta, not both")
-        goal = _place(ctx.profile, place)
+        goal = base_pose(ctx, place, "drive_to")
         gx, gy, gth = goal.x, goal.y, goal.theta
     else:
         if x is None or y is None:
@@ -312,49 +333,42 @@ def drive_to(
     deadline = None if timeout is None else ctx.clock.now() + timeout
     k_w = 2.0
     at_position = False
-    try:
-        while True:
-            st = base.state()
-            if st.faults:
-                yield from brake(ctx, base)
-                raise SkillFailure(FailureKind.EXECUTION, f"drive_to: base fault: {', '.join(sorted(st.faults))}")
-            if deadline is not None and ctx.clock.now() > deadline:
-                yield from brake(ctx, base)
-                raise SkillFailure(FailureKind.TIMEOUT, f"drive_to: not there after {timeout:g} s")
-            p = st.pose
-            dx, dy = gx - p.x, gy - p.y
-            dist = math.hypot(dx, dy)
-            if at_position and dist > 2.0 * tolerance:
-                at_position = False
-            if not at_position and dist <= tolerance:
-                at_position = True
-            if not at_position:
-                err = _wrap(math.atan2(dy, dx) - p.theta)
-                w = max(-w_max, min(w_max, k_w * err))
-                v = 0.0 if abs(err) > 0.35 else min(v_max, math.sqrt(2.0 * base.max_linear_accel * 0.5 * dist)) * math.cos(err)
-            else:
-                err = 0.0 if gth is None else _wrap(gth - p.theta)
-                if abs(err) <= angle_tolerance:
-                    rested = yield from brake(ctx, base)
-                    if not rested:
-                        raise SkillFailure(FailureKind.EXECUTION, "drive_to: the base did not come to rest")
-                    st = base.state()
-                    if st.pose.distance_to(Pose2D(gx, gy)) <= 2.0 * tolerance:
-                        return {"pose": [st.pose.x, st.pose.y, st.pose.theta]}
-                    at_position = False
-                    continue
-                v = 0.0
-                w = max(-w_max, min(w_max, k_w * err))
-                w = math.copysign(max(abs(w), 0.05), w)
-            base.set_velocity(v, w)
-            yield
-    except SkillCancelled:
-        yield from brake(ctx, base)
-        raise
+
+    def step(st: BaseState, _now: float) -> tuple[float, float] | Step:
+        """Turn towards the goal and drive to it; at the position, turn to ``theta``."""
+        nonlocal at_position
+        p = st.pose
+        dx, dy = gx - p.x, gy - p.y
+        dist = math.hypot(dx, dy)
+        if at_position and dist > 2.0 * tolerance:
+            at_position = False
+        if not at_position and dist <= tolerance:
+            at_position = True
+        if not at_position:
+            err = wrap_angle(math.atan2(dy, dx) - p.theta)
+            w = max(-w_max, min(w_max, k_w * err))
+            v = 0.0 if abs(err) > 0.35 else min(v_max, math.sqrt(2.0 * base.max_linear_accel * 0.5 * dist)) * math.cos(err)
+            return v, w
+        err = 0.0 if gth is None else wrap_angle(gth - p.theta)
+        if abs(err) <= angle_tolerance:
+            return Step.ARRIVED
+        w = max(-w_max, min(w_max, k_w * err))
+        return 0.0, math.copysign(max(abs(w), 0.05), w)
+
+    while True:
+        rested = yield from motion_loop(ctx, base, step, fault="drive_to: base fault", deadline=deadline,
+                                        timeout=f"drive_to: not there after {timeout or 0:g} s",
+                                        timeout_kind=FailureKind.TIMEOUT)
+        if not rested:
+            raise SkillFailure(FailureKind.EXECUTION, "drive_to: the base did not come to rest")
+        st = base.state()
+        if st.pose.distance_to(Pose2D(gx, gy)) <= 2.0 * tolerance:
+            return {"pose": [st.pose.x, st.pose.y, st.pose.theta]}
+        at_position = False  # pushed off the goal while braking: drive back to it
 
 
 @skill("stop_base", needs=("base",), outputs=[Output("pose", list, doc="[x, y, theta] at rest, map frame")])
-def stop_base(ctx: SkillContext) -> Gen:
+def stop_base(ctx: SkillContext) -> SkillGen:
     """Brake the base to rest; fails if it is still moving after a few seconds."""
     base = ctx.robot.base
     assert base is not None

@@ -31,7 +31,12 @@ them): ``mmexec validate --config`` checks each is inside the map, free for the 
 footprint and reachable from ``home`` (:func:`base_poses`).
 
 The sections every robot profile may hold (``home``, ``places``, ``named_poses``: read by
-the primitive skills and the fetch skills alike) are declared by this module.
+the primitive skills and the general skills alike) are declared by this module; the
+general skill modules declare theirs (``nav``, ``arm``, ``camera``, ``search``), the fetch
+package ``fetch``. A skill reads a section through :func:`section` (bound, checked, its
+defaults when the profile has none). A setting that moved to another section is recorded
+with :meth:`ProfileSchema.move`, so a config that still writes it at the old place gets a
+located problem whose hint names the new place.
 """
 
 from __future__ import annotations
@@ -40,12 +45,13 @@ import dataclasses
 import math
 import types
 import typing
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
-from mmexec.config.yamlload import Mark, Problems, bind, did_you_mean
+from mmexec.config.yamlload import Mark, Problems, YDict, bind, did_you_mean, mark_of
 from mmexec.drivers.interfaces import Pose2D
+from mmexec.skills.base import FailureKind, SkillContext, SkillFailure
 
 __all__ = [
     "PROFILE",
@@ -55,6 +61,8 @@ __all__ = [
     "ProfileSection",
     "base_poses",
     "declare_section",
+    "declare_settings",
+    "section",
     "setting",
 ]
 
@@ -148,6 +156,7 @@ class ProfileSchema:
 
     def __init__(self) -> None:
         self._sections: dict[str, ProfileSection] = {}
+        self._moved: dict[tuple[str, str], str] = {}
 
     def declare(self, key: str, schema: Any, *, package: str, doc: str, unit: str = "",
                 base_pose: bool = False) -> ProfileSection:
@@ -166,12 +175,42 @@ class ProfileSchema:
         """The declared sections by key."""
         return types.MappingProxyType(self._sections)
 
+    def move(self, old: str, new: str) -> None:
+        """Record that setting ``old`` (``SECTION.KEY`` below ``profile``, e.g.
+        ``fetch.search_locations``) now lives at ``new`` (e.g. ``search.locations``): a
+        profile that still writes ``old`` gets an unknown-key problem at it whose hint names
+        ``new``, and the rest of the section binds as if ``old`` were not there."""
+        key, _, setting_name = old.partition(".")
+        if not setting_name or "." in setting_name:
+            raise ValueError(f"a moved setting is SECTION.KEY, got {old!r}")
+        self._moved[(key, setting_name)] = new
+
+    def _without_moved(self, key: str, raw: Any, mark: Mark, problems: Problems, path: str) -> Any:
+        """``raw`` (section ``key`` as written) without its moved settings, each reported."""
+        if not isinstance(raw, Mapping) or not any((key, k) in self._moved for k in raw):
+            return raw
+        key_marks = getattr(raw, "key_marks", {})
+        value_marks = getattr(raw, "value_marks", {})
+        rest = YDict()
+        rest.mark, rest.key_marks, rest.value_marks = mark_of(raw, mark), {}, {}
+        for k, v in raw.items():
+            new = self._moved.get((key, k))
+            if new is not None:
+                problems.add(key_marks.get(k, mark),
+                             f"{path}.{key}.{k}: unknown key; did you mean '{path}.{new}'? (the setting moved there)")
+                continue
+            rest[k] = v
+            rest.key_marks[k], rest.value_marks[k] = key_marks.get(k, mark), value_marks.get(k, mark)
+        return rest
+
     def bind_section(self, key: str, raw: Any, mark: Mark, problems: Problems, path: str = "profile") -> Any:
         """Bind the value of declared section ``key`` and check its ranges, adding every
-        problem to ``problems``. Returns the bound value, or None when it has problems."""
+        problem to ``problems`` (a moved setting too: :meth:`move`). Returns the bound
+        value, or None when it has problems."""
         section = self._sections[key]
         sub = f"{path}.{key}"
         before = len(problems)
+        raw = self._without_moved(key, raw, mark, problems, path)
         out = bind(section.schema, raw, mark, sub, problems)
         _check_bounds(section.schema, raw, mark, sub, problems)
         return out if len(problems) == before else None
@@ -201,7 +240,7 @@ class ProfileSchema:
         return bound, problems
 
     def _nested_hint(self, key: str) -> str:
-        """``"; did you mean 'fetch.arm.tcp_offset'?"`` when a declared section has a
+        """``"; did you mean 'arm.tcp_offset'?"`` when a declared section has a
         setting named (about) ``key`` at a deeper level, else ``""``."""
         paths = {".".join(p): p[-1] for s in self._sections.values() for p in _setting_paths(s.schema, (s.key,))}
         hit = did_you_mean(key, set(paths.values()))
@@ -335,11 +374,51 @@ def _poses(tp: Any, raw: Any, mark: Mark, path: str, is_pose: bool) -> list[Name
 # --------------------------------------------------------------------------- the schema
 
 
-#: The profile schema of this process: the built-in sections below, the fetch package's
-#: ``fetch`` section, and whatever user skill modules declare.
+#: The profile schema of this process: the built-in sections below, those of the general
+#: skill modules and the fetch package, and whatever user skill modules declare.
 PROFILE = ProfileSchema()
 
 declare_section = PROFILE.declare
+
+#: (section key, id of its raw value) -> (the raw value, kept so its id stays unique; bound value)
+_BOUND: dict[tuple[str, int], tuple[Any, Any]] = {}
+
+
+def section(profile: Mapping[str, Any], key: str) -> Any:
+    """The bound value of declared section ``key`` of a robot profile (a config's, or one
+    set up in code): the schema's defaults when the profile has no such section.
+    SkillFailure(PRECONDITION) with the first problem, ``FILE:LINE:COL: profile.KEY...``
+    when the profile came from a file (a config checked at load cannot be wrong here; a
+    profile set up in code, as in tests, can). Bound values are cached per raw value."""
+    raw = profile.get(key) if isinstance(profile, Mapping) else None
+    cached = _BOUND.get((key, id(raw)))
+    if cached is not None and cached[0] is raw:
+        return cached[1]
+    problems = Problems()
+    out = PROFILE.bind_section(key, raw, mark_of(raw, Mark("<profile>", 1, 1)), problems)
+    if problems:
+        raise SkillFailure(FailureKind.PRECONDITION, str(problems[0]))
+    _BOUND[(key, id(raw))] = (raw, out)
+    return out
+
+
+S = TypeVar("S")
+
+
+def declare_settings(key: str, schema: type[S], *, package: str, doc: str) -> Callable[[SkillContext], S]:
+    """Declare section ``key`` (a dataclass ``schema`` whose settings all have defaults)
+    and return the function its skills read it with: ``reader(ctx)`` is the bound
+    section of ``ctx.profile`` (:func:`section`: its defaults when the profile has none,
+    SkillFailure(PRECONDITION) when it is wrong)."""
+    declare_section(key, schema, package=package, doc=doc)
+
+    def reader(ctx: SkillContext) -> S:
+        out = section(ctx.profile, key)
+        assert isinstance(out, schema)
+        return out
+
+    reader.__doc__ = f"The bound ``profile.{key}`` section ({doc}; defaults when the profile has none)."
+    return reader
 
 
 def base_poses(profile: Mapping[str, Any], mark: Mark) -> list[NamedPose]:
@@ -352,4 +431,4 @@ declare_section("home", tuple[float, float, float], package="mmexec.skills", uni
 declare_section("places", dict[str, tuple[float, float, float]], package="mmexec.skills", unit="m, m, rad",
                 base_pose=True, doc="more named base poses [x, y, theta] in map (navigate / drive_to goals)")
 declare_section("named_poses", dict[str, list[float]], package="mmexec.skills", unit="rad",
-                doc="arm joint poses by name, in the arm's joint order (move_arm pose, fetch.arm roles)")
+                doc="arm joint poses by name, in the arm's joint order (move_arm pose, arm roles)")

@@ -1,6 +1,7 @@
 """The real-robot configs carry everything trees/fetch_item.yaml needs in a room built like
 the sim's ``lab`` world: the map (config/maps/lab.*), the planning scene and the
-``profile.fetch`` section of the matching sim config. Checked without opening hardware:
+profile sections (fetch, arm, camera, search; nav within the base's limits) of the
+matching sim config. Checked without opening hardware:
 the ``robot:`` section is planned (``mmexec.drivers.robot.check``) and only its map and
 scene are built; ``mmexec run`` with no robot attached fails at once, in one line."""
 
@@ -13,18 +14,20 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from mmexec.config.yamlload import Mark, Problems, YDict, bind, mark_of
+from mmexec.config.yamlload import YDict
 from mmexec.drivers import robot as robot_backend
 from mmexec.drivers.kobuki.base import KobukiBase
 from mmexec.executive.config import load_config
 from mmexec.sim.models import MODEL_INFO
 from mmexec.sim.world import load_world
-from mmexec.skills.fetch.common import FetchProfile, check_profile
+from mmexec.skills.fetch import FetchProfile
 from mmexec.skills.navigation.astar import plan_path
 from mmexec.skills.navigation.grid import inflate
+from mmexec.skills.profile import PROFILE
 
 MISSION = "trees/fetch_item.yaml"
 
@@ -35,13 +38,13 @@ CONFIGS = {
 }
 
 
-def _fetch(loaded) -> FetchProfile:
-    raw = loaded.raw["profile"]["fetch"]
-    problems = Problems()
-    fp = bind(FetchProfile, raw, mark_of(raw, Mark(str(loaded.path), 1, 1)), "profile.fetch", problems)
+def _profile(loaded) -> dict[str, Any]:
+    """The config's profile sections, bound (fetch, nav, arm, camera, search, ...)."""
+    raw = loaded.raw["profile"]
+    bound, problems = PROFILE.check(raw, raw.mark)
     assert not problems, [str(p) for p in problems]
-    assert isinstance(fp, FetchProfile)
-    return fp
+    assert isinstance(bound["fetch"], FetchProfile)
+    return bound
 
 
 def _map_and_scene_only(section: YDict) -> YDict:
@@ -101,40 +104,40 @@ def test_fetch_profile_binds_and_mirrors_the_sim_config(repo_root: Path, lab, co
     sim_config, _model = CONFIGS[config]
     loaded, sim = load_config(repo_root / config), load_config(repo_root / sim_config)
     profile = loaded.config.profile
-    check_profile(loaded.raw["profile"])
-    fp, sp = _fetch(loaded), _fetch(sim)
+    fp, sp = _profile(loaded), _profile(sim)
     # the lab's poses and the manipulation settings are the sim's; nav follows the base
-    for key in ("depot", "search_locations", "approach_distances", "item_size", "marker_length",
-                "marker_dictionary", "search_step_deg", "settle_time", "detect_frames", "grasp_depth",
-                "grasp_height", "refine_at", "redetect_at_standoff", "pre_grasp", "retract",
-                "place_retract", "grasp_force", "back_off", "min_held_width", "arm"):
-        assert getattr(fp, key) == getattr(sp, key), key
+    for key in ("fetch", "arm", "camera", "search"):
+        assert fp[key] == sp[key], key
+    for key in ("approach_distances", "refine_at", "redetect_at_standoff"):
+        assert getattr(fp["nav"], key) == getattr(sp["nav"], key), key
     assert list(profile["home"]) == list(sim.config.profile["home"]) == list(lab.spec.start)
     assert list(loaded.raw["robot"]["base"]["start"]) == list(profile["home"])
     poses = profile["named_poses"]
     for role in ("stow", "carry", "look", "reach"):
-        name = getattr(fp.arm, role)
+        name = getattr(fp["arm"], role)
         assert name is None or (name in poses and len(poses[name]) == 6), (role, name)
     base = loaded.raw["robot"]["base"]
-    assert fp.nav.max_v <= base["max_linear"] and fp.nav.max_w <= base["max_angular"]
-    assert fp.nav.accel_v <= base["linear_accel"] and fp.nav.accel_w <= base["angular_accel"]
+    nav = fp["nav"]
+    assert nav.max_v <= base["max_linear"] and nav.max_w <= base["max_angular"]
+    assert nav.accel_v <= base["linear_accel"] and nav.accel_w <= base["angular_accel"]
 
 
 @pytest.mark.parametrize("config", list(CONFIGS))
 def test_home_depot_and_search_locations_are_free_and_connected(repo_root: Path, config: str) -> None:
     _sim_config, model = CONFIGS[config]
     loaded = load_config(repo_root / config)
-    fp = _fetch(loaded)
+    prof = _profile(loaded)
+    fp, margin = prof["fetch"], prof["nav"].margin
     robot = robot_backend.build(_map_and_scene_only(loaded.section()), profile={}, seed=None, options={})
     robot.close()  # nothing was opened; the map stays on it
     # navigate inflates the map by Base.radius (the Kobuki driver's, or the base section's
     # footprint_radius) plus nav.margin; that must cover the platform's footprint as the sim's does
     radius = loaded.raw["robot"]["base"].get("footprint_radius", KobukiBase.radius)
-    assert radius + fp.nav.margin >= MODEL_INFO[model].footprint_radius + 0.03 - 1e-9
-    cm = inflate(robot.occupancy, radius, fp.nav.margin)
+    assert radius + margin >= MODEL_INFO[model].footprint_radius + 0.03 - 1e-9
+    cm = inflate(robot.occupancy, radius, margin)
     home = tuple(loaded.config.profile["home"])
     stops = {"home": home, "depot": fp.depot.base}
-    stops.update({f"search_locations[{i}]": p for i, p in enumerate(fp.search_locations)})
+    stops.update({f"search.locations[{i}]": p for i, p in enumerate(prof["search"].locations)})
     for name, (x, y, _th) in stops.items():
         assert cm.is_free(x, y), f"{config}: {name} ({x}, {y}) is inside the inflated map"
         assert plan_path(cm, home[:2], (x, y)) is not None, f"{config}: no path from home to {name}"

@@ -111,12 +111,14 @@ profile:
     too_close: [1.8, 1.0, 0.0]
   fetch:
     depot: {base: [1.0, 0.5, 0.0], place: [1.0, 0.2, 0.3]}
-    search_locations:
+    settle_time: 0.2
+  search:
+    locations:
       - [1.0, 1.5, 0.0]
       - [3.0, 1.0, 3.14]
-    detect_frames: three
-    nav: {max_vv: 0.3}
-    arm: {velocity_scale: 1.5}
+  camera: {detect_frames: three}
+  nav: {max_vv: 0.3}
+  arm: {velocity_scale: 1.5}
 """
 
 
@@ -144,11 +146,14 @@ def test_every_profile_and_pose_problem_is_located_and_reported_at_once(run_cli,
         "9:14: profile.places.in_wall: (2.05, 1) is in an obstacle of robot.map",
         ("10:16: profile.places.too_close: (1.8, 1) is 0.20 m from an obstacle of robot.map; the base needs "
          "0.208 m (footprint radius 0.178 m + nav margin 0.03 m)"),
-        ("15:9: profile.fetch.search_locations[1]: (3, 1) cannot be reached from profile.home (0.5, 1): "
+        # a setting written where it was before the general sections (issue 10 item 5)
+        ("13:5: profile.fetch.settle_time: unknown key; did you mean 'profile.search.settle_time'? "
+         "(the setting moved there)"),
+        ("17:9: profile.search.locations[1]: (3, 1) cannot be reached from profile.home (0.5, 1): "
          "no path in robot.map inflated by 0.208 m"),
-        "16:20: profile.fetch.detect_frames: expected an integer, got 'three'",
-        "17:11: profile.fetch.nav.max_vv: unknown key; did you mean 'max_v'?",
-        "18:27: profile.fetch.arm.velocity_scale: expected in (0, 1], got 1.5",
+        "18:27: profile.camera.detect_frames: expected an integer, got 'three'",
+        "19:9: profile.nav.max_vv: unknown key; did you mean 'max_v'?",
+        "20:25: profile.arm.velocity_scale: expected in (0, 1], got 1.5",
     ]
     mission_lines = [ln for ln in lines if ln.startswith(str(repo_root / "trees"))]
     assert any("skill 'pick' needs a arm" in ln for ln in mission_lines), mission_lines
@@ -164,7 +169,7 @@ def test_a_typo_in_a_section_name_gets_a_hint(run_cli, repo_root: Path, tmp_path
     cfg.write_text("backend: mock\nprofile:\n  tcp_offset: 0.155\n")
     res = run_cli("validate", repo_root / "trees/demo_mock.yaml", "--config", cfg)
     assert res.err.splitlines() == [
-        f"{cfg}:3:3: profile.tcp_offset: unknown profile section; did you mean 'fetch.arm.tcp_offset'?"]
+        f"{cfg}:3:3: profile.tcp_offset: unknown profile section; did you mean 'arm.tcp_offset'?"]
 
 
 def test_sim_poses_are_checked_on_the_world_map(run_cli, repo_root: Path, tmp_path: Path) -> None:
@@ -191,7 +196,7 @@ def test_a_bad_world_is_located_with_the_profile_problems(run_cli, repo_root: Pa
     settle_line = next(i for i, ln in enumerate(text.splitlines(), 1) if "settle_time: 0.2" in ln)
     assert len(lines) == 2, lines
     assert lines[0].startswith(f"{cfg}:{world_line}:10: unknown world 'lba'") and "did you mean 'lab'?" in lines[0]
-    assert lines[1] == f"{cfg}:{settle_line}:18: profile.fetch.settle_time: expected >= 0 s, got -1"
+    assert lines[1] == f"{cfg}:{settle_line}:18: profile.search.settle_time: expected >= 0 s, got -1"
 
 
 @pytest.mark.parametrize("config", sorted(p.name for p in (Path(__file__).parents[2] / "config").glob("*.yaml")))
@@ -226,13 +231,13 @@ def test_run_options_a_backend_cannot_honour_are_errors(run_cli, repo_root: Path
 
 
 def test_a_named_pose_typo_is_found_before_the_robot_drives(run_cli, repo_root: Path, tmp_path: Path) -> None:
-    """fetch.arm.stow names a pose of profile.named_poses: a typo there used to pass validate
+    """arm.stow names a pose of profile.named_poses: a typo there used to pass validate
     and fail the first arm move of the run, after the robot had driven to the shelf."""
     text = (repo_root / "config/locobot_sim.yaml").read_text()
-    stow = "      stow: tuck"
+    stow = "    stow: tuck"
     line = next(i for i, ln in enumerate(text.splitlines(), 1) if ln.startswith(stow))
     cfg = tmp_path / "sim.yaml"
-    cfg.write_text(text.replace(stow, "      stow: tuk "))
+    cfg.write_text(text.replace(stow, "    stow: tuk "))
     res = run_cli("validate", repo_root / MISSION, "--config", cfg)
     assert (res.rc, res.err.splitlines()) == (2, [
-        f"{cfg}:{line}:13: profile.fetch.arm.stow: 'tuk' is not one of profile.named_poses; did you mean 'tuck'?"])
+        f"{cfg}:{line}:11: profile.arm.stow: 'tuk' is not one of profile.named_poses; did you mean 'tuck'?"])

@@ -9,7 +9,15 @@ import pytest
 import mmexec.skills.primitives  # noqa: F401 - registers the primitives
 from mmexec.drivers.interfaces import BaseState
 from mmexec.drivers.mock import MockRobot
-from mmexec.skills.base import REGISTRY, FailureKind, SkillContext, SkillRun, SkillStatus
+from mmexec.skills.base import (
+    REGISTRY,
+    FailureKind,
+    SkillContext,
+    SkillFailure,
+    SkillRun,
+    SkillStatus,
+)
+from mmexec.skills.primitives import Step, motion_loop
 
 
 def test_registered_with_declared_params() -> None:
@@ -195,3 +203,76 @@ def test_drive_to_fails_at_once_when_the_base_goes_blind(skill_ctx, mock_robot) 
     assert "link_lost" in run.failure.reason
     assert mock_robot.clock.now() == t0
     assert base._cmd == (0.0, 0.0)  # the stop was commanded
+
+
+# --------------------------------------------------------------------------- the motion loop
+
+
+def _run_loop(ctx: SkillContext, robot: MockRobot, gen, *, cancel_at: int | None = None,
+              max_ticks: int = 500) -> tuple[object, int]:
+    """Drive a motion-loop generator tick by tick (throwing SkillCancelled into it at tick
+    ``cancel_at``); (its return value or the exception it ended with, ticks taken)."""
+    from mmexec.skills.base import SkillCancelled
+
+    for tick in range(max_ticks):
+        try:
+            if tick == cancel_at:
+                gen.throw(SkillCancelled())
+            else:
+                next(gen)
+        except StopIteration as stop:
+            return stop.value, tick
+        except (SkillFailure, SkillCancelled) as e:
+            return e, tick
+        robot.spin(0.05)
+    raise AssertionError("motion loop still running")
+
+
+def test_motion_loop_sends_commands_until_arrived_then_brakes(skill_ctx, mock_robot) -> None:
+    base = mock_robot.base
+    sent: list[float] = []
+
+    def step(st: BaseState, now: float):
+        sent.append(now)
+        if st.pose.x >= 0.3:
+            return Step.ARRIVED
+        return Step.HOLD if len(sent) % 2 else (0.3, 0.0)
+
+    rested, _ticks = _run_loop(skill_ctx, mock_robot, motion_loop(
+        skill_ctx, base, step, fault="base fault", deadline=None, timeout="unused"))
+    assert rested is True and base.pose.x >= 0.3 and abs(base.state().v) < 1e-3
+
+
+@pytest.mark.parametrize("case", ["fault", "timeout"])
+def test_motion_loop_brakes_then_fails_on_a_fault_or_timeout(skill_ctx, mock_robot, case: str) -> None:
+    base = mock_robot.base
+    reasons: list[str] = []
+    deadline = mock_robot.clock.now() + 1.0
+
+    def step(st: BaseState, now: float):
+        if case == "fault" and st.pose.x > 0.2:
+            base.blocked = True
+        return 0.4, 0.0
+
+    err, _ticks = _run_loop(skill_ctx, mock_robot, motion_loop(
+        skill_ctx, base, step, fault="base fault while testing", deadline=deadline, timeout="not done in 1 s",
+        timeout_kind=FailureKind.TIMEOUT, on_failure=reasons.append))
+    assert isinstance(err, SkillFailure)
+    if case == "fault":
+        assert err.kind is FailureKind.EXECUTION and err.reason == "base fault while testing: bumper_centre"
+        assert reasons == ["base fault: bumper_centre"]
+    else:
+        assert (err.kind, err.reason, reasons) == (FailureKind.TIMEOUT, "not done in 1 s", ["timeout"])
+        assert mock_robot.clock.now() > deadline
+    assert abs(base.state().v) < 1e-3  # braked before failing
+
+
+def test_motion_loop_cancelled_brakes_to_rest_then_reraises(skill_ctx, mock_robot) -> None:
+    from mmexec.skills.base import SkillCancelled
+
+    base = mock_robot.base
+    err, ticks = _run_loop(skill_ctx, mock_robot, motion_loop(
+        skill_ctx, base, lambda st, now: (0.4, 0.0), fault="base fault", deadline=None, timeout="unused"),
+        cancel_at=30)
+    assert isinstance(err, SkillCancelled) and ticks > 30  # braking took ticks
+    assert abs(base.state().v) < 1e-3

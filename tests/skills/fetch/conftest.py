@@ -30,7 +30,7 @@ def fetch_robot() -> Iterator[MockRobot]:
 @pytest.fixture
 def fetch_ctx(fetch_robot: MockRobot) -> Iterator[SkillContext]:
     """A SkillContext on ``fetch_robot``; ``ctx.events`` collects (event, fields)."""
-    from mmexec.skills.fetch.arm import close_workspace
+    from mmexec.skills.manipulation.arm import close_workspace
 
     events: list[tuple[str, dict[str, Any]]] = []
 

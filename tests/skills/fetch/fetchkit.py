@@ -1,6 +1,7 @@
-"""Helpers for the fetch skill tests on the mock backend: a small occupancy map, a
-fetch profile, and a camera that renders synthetic ArUco frames of markers placed in
-the map (``mmexec.skills.perception.synthetic``), seen from the mock base's pose."""
+"""Helpers for the fetch mission's skill tests on the mock backend: a small occupancy map,
+a robot profile (nav, arm, camera, search and fetch sections), and a camera that renders
+synthetic ArUco frames of markers placed in the map
+(``mmexec.skills.perception.synthetic``), seen from the mock base's pose."""
 
 from __future__ import annotations
 
@@ -104,19 +105,15 @@ FETCH_PROFILE: dict[str, Any] = {
         "tuck": [0.0, -0.4, 1.1, 0.0, 1.4, 0.0],
         "carry": [0.0, -0.2, 0.6, 0.0, 0.5, 0.0],
     },
+    "nav": {"max_v": 0.6, "max_w": 2.0, "accel_v": 1.0, "accel_w": 3.5, "timeout": 60.0,
+            "approach_distances": [0.5, 0.7, 0.9]},
+    "arm": {"model": "locobot_wx250s", "time_limit": 1.0, "attempts": 3, "stow": "tuck", "carry": "carry",
+            "grasp_force": 5.0, "min_held_width": 0.02},
+    "camera": {"marker_length": MARKER_LENGTH, "detect_frames": 2},
+    "search": {"locations": [[4.0, 1.0, 0.0], [4.0, 4.0, 3.14159]], "step_deg": 30, "settle_time": 0.1},
     "fetch": {
         "depot": {"base": [1.0, 4.0, 1.5708], "place": [1.0, 4.45, 0.25]},
-        "search_locations": [[4.0, 1.0, 0.0], [4.0, 4.0, 3.14159]],
-        "approach_distances": [0.5, 0.7, 0.9],
-        "marker_length": MARKER_LENGTH,
-        "search_step_deg": 30,
-        "settle_time": 0.1,
-        "detect_frames": 2,
-        "min_held_width": 0.02,
-        "grasp_force": 5.0,
         "back_off": 0.1,
-        "nav": {"max_v": 0.6, "max_w": 2.0, "accel_v": 1.0, "accel_w": 3.5, "timeout": 60.0},
-        "arm": {"model": "locobot_wx250s", "time_limit": 1.0, "attempts": 3, "stow": "tuck", "carry": "carry"},
     },
 }
 
@@ -124,7 +121,7 @@ FETCH_PROFILE: dict[str, Any] = {
 def run_skill(ctx: SkillContext, name: str, params: dict[str, Any] | None = None, *, period: float = 0.05,
               max_ticks: int = 20_000, on_tick: Any = None) -> Any:
     """Run the registered skill ``name`` to completion on ``ctx``'s mock robot; returns the SkillRun."""
-    import mmexec.skills.fetch  # noqa: F401  (registers the skills)
+    import mmexec.skills.fetch  # noqa: F401  (registers the fetch mission's skills)
     from mmexec.skills.base import REGISTRY, SkillRun, SkillStatus
 
     run = SkillRun(REGISTRY.get(name), ctx, params or {})
@@ -145,7 +142,7 @@ def wait_for_planner(ctx: SkillContext) -> None:
     """Block until the arm workspace's planning thread has finished the jobs handed to it
     so far (a no-op queued behind them on its single worker), so a test ticks the skill
     deterministically instead of racing the planner with thousands of empty ticks."""
-    from mmexec.skills.fetch.common import WORLD_ARM
+    from mmexec.skills.manipulation.arm import WORLD_ARM
 
     ws = ctx.world.get(WORLD_ARM)
     executor = getattr(ws, "executor", None)

@@ -9,7 +9,8 @@ import pytest
 from fetchkit import events_of, marker_pose, run_skill
 
 from mmexec.skills.base import FailureKind, SkillStatus
-from mmexec.skills.fetch.common import WORLD_MARKERS, WORLD_SEARCH
+from mmexec.skills.perception.detect import WORLD_MARKERS
+from mmexec.skills.search import WORLD_SEARCH
 
 
 def _deg(headings: list[float]) -> list[int]:

@@ -11,7 +11,7 @@ from fetchkit import events_of, marker_pose, room_grid, run_skill
 
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.skills.base import FailureKind, SkillStatus
-from mmexec.skills.fetch.common import WORLD_MARKERS, MarkerEstimate
+from mmexec.skills.perception.detect import WORLD_MARKERS, MarkerEstimate
 
 # a wall across the room at x in [2.5, 3.0], open only at the top (y > 4.5)
 WALL = (2.5, 0.0, 3.0, 4.5)
@@ -86,7 +86,7 @@ def test_navigate_goal_in_the_inflation_is_served_from_the_nearest_free_point(fe
 
 def test_navigate_goal_search_zero_keeps_the_strict_check(fetch_robot, fetch_ctx):
     fetch_robot.occupancy = room_grid(boxes=[WALL])
-    fetch_robot.profile["fetch"]["nav"] = {"goal_search": 0.0}
+    fetch_robot.profile["nav"] = {"goal_search": 0.0}
     run = run_skill(fetch_ctx, "navigate", {"x": 2.4, "y": 2.0})
     assert run.status is SkillStatus.FAILURE
     assert run.failure.kind is FailureKind.PLANNING and "in collision" in run.failure.reason
@@ -173,7 +173,7 @@ def test_approach_redetects_from_the_standoff_when_the_profile_asks(fetch_robot,
     T_off = T_true.copy()
     T_off[1, 3] += 0.03  # seen from 0.9 m (no intermediate look): 3 cm off sideways
     _estimate(fetch_ctx, 7, T_off, distance=0.9)
-    fetch_robot.profile["fetch"]["redetect_at_standoff"] = redetect
+    fetch_robot.profile["nav"]["redetect_at_standoff"] = redetect
     run = run_skill(fetch_ctx, "approach", {"marker": 7, "distance": 0.5})
     assert run.status is SkillStatus.SUCCESS, run.failure
     est = fetch_ctx.world[WORLD_MARKERS][7]
@@ -202,12 +202,12 @@ def _drive(ctx, gen, period=0.05, max_ticks=2000):
 def test_back_off_stays_in_the_free_part_of_the_map(fetch_robot, fetch_ctx, behind, expected):
     """After a pick the base backs off straight; with an obstacle behind it (not the way it
     came) it stops where the inflated map stops being free, and logs by how much."""
-    from mmexec.skills.fetch.navigate import back_off
+    from mmexec.skills.navigation.navigate import back_off_by
 
     fetch_robot.base.pose = Pose2D(2.0, 3.0, 0.0)
     boxes = [] if behind is None else [(1.0, 2.5, 1.2, 3.5)]  # a wall 0.8-1.0 m behind
     fetch_robot.occupancy = room_grid(boxes=boxes)
-    end = _drive(fetch_ctx, back_off(fetch_ctx, 0.25 if behind is None else 0.9))
+    end = _drive(fetch_ctx, back_off_by(fetch_ctx, 0.25 if behind is None else 0.9))
     moved = Pose2D(2.0, 3.0, 0.0).distance_to(end)
     shortened = events_of(fetch_ctx, "back_off_shortened")
     if expected is not None:
@@ -216,6 +216,16 @@ def test_back_off_stays_in_the_free_part_of_the_map(fetch_robot, fetch_ctx, behi
         [ev] = shortened
         assert ev["asked"] == 0.9 and 0.0 < ev["used"] < 0.9
         assert moved == pytest.approx(ev["used"], abs=0.01)
-        from mmexec.skills.fetch.navigate import costmap
+        from mmexec.skills.navigation.navigate import costmap
 
         assert costmap(fetch_ctx).is_free(end.x, end.y)
+
+
+def test_back_off_skill_drives_straight_back(fetch_robot, fetch_ctx):
+    fetch_robot.base.pose = Pose2D(2.0, 3.0, 0.0)
+    run = run_skill(fetch_ctx, "back_off", {"distance": 0.3})
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    x, y, _th = run.outputs["pose"]
+    assert x == pytest.approx(1.7, abs=0.01) and y == pytest.approx(3.0, abs=0.01)
+    bad = run_skill(fetch_ctx, "back_off", {"distance": -0.1})
+    assert bad.failure.kind is FailureKind.PRECONDITION and "distance must be >= 0 m" in bad.failure.reason

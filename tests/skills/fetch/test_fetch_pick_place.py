@@ -13,8 +13,9 @@ from fetchkit import events_of, marker_pose, run_skill
 from mmexec.drivers.interfaces import GraspState, Pose2D
 from mmexec.drivers.mock.robot import MockArm, MockGripper
 from mmexec.skills.base import FailureKind, SkillStatus
-from mmexec.skills.fetch.common import WORLD_ARM, WORLD_HELD, WORLD_MARKERS, MarkerEstimate
 from mmexec.skills.manipulation import wx250s
+from mmexec.skills.manipulation.arm import WORLD_ARM, WORLD_HELD
+from mmexec.skills.perception.detect import WORLD_MARKERS, MarkerEstimate
 
 
 @pytest.fixture

@@ -12,8 +12,6 @@ import pytest
 
 from mmexec.drivers.interfaces import SceneBox
 from mmexec.skills.base import SkillCancelled, SkillContext
-from mmexec.skills.fetch.arm import ArmWorkspace, off_tick
-from mmexec.skills.fetch.common import ArmSettings
 from mmexec.skills.manipulation import (
     CANCELLED,
     ArmModel,
@@ -23,6 +21,7 @@ from mmexec.skills.manipulation import (
     grasp_poses,
     wx250s,
 )
+from mmexec.skills.manipulation.arm import ArmSettings, ArmWorkspace, off_tick
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mmexec.skills.fetch.common import FetchProfile
+from mmexec.skills.fetch.profile import DepotSettings, FetchProfile
 from mmexec.skills.manipulation.grasp import grasp_poses, place_poses
 
 
@@ -41,19 +41,19 @@ def test_place_with_grasp_height_releases_the_item_centre_at_the_place_point() -
 
 
 def test_profile_grasp_height_and_refine_at_are_checked() -> None:
-    from mmexec.skills.fetch.common import DepotSettings
+    from mmexec.skills.navigation.navigate import NavSettings
 
     depot = DepotSettings((0.0, 0.0, 0.0), (0.0, 0.0, 0.3))
     assert FetchProfile(depot=depot).grasp_height == 0.0  # the seed's poses unless a profile says otherwise
-    assert FetchProfile(depot=depot).refine_at == 0.8
+    assert NavSettings().refine_at == 0.8
     bad = FetchProfile(depot=depot, grasp_height=0.04).validate()
     assert any("grasp_height" in m for m in bad)
     # refine_at > 0 is a declared range of the profile schema, checked where the value is written
     from mmexec.config.yamlload import Problems, load_yaml_text
     from mmexec.skills.profile import PROFILE
 
-    raw = load_yaml_text("depot: {base: [0, 0, 0], place: [0, 0, 0.3]}\nrefine_at: 0.0\n", "c.yaml")
+    raw = load_yaml_text("max_v: 0.5\nrefine_at: 0.0\n", "c.yaml")
     problems = Problems()
-    assert PROFILE.bind_section("fetch", raw, raw.mark, problems) is None
-    assert [str(p) for p in problems] == ["c.yaml:2:12: profile.fetch.refine_at: expected > 0 m, got 0.0"]
+    assert PROFILE.bind_section("nav", raw, raw.mark, problems) is None
+    assert [str(p) for p in problems] == ["c.yaml:2:12: profile.nav.refine_at: expected > 0 m, got 0.0"]
     assert FetchProfile(depot=depot, grasp_height=0.016).validate() == []

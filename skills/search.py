@@ -1,10 +1,15 @@
-"""The seed paper's search phase.
+"""The ``search`` skill: the seed paper's search phase.
 
 If the requested marker is not in view, the robot turns in place in ``step`` degree
 steps (30 by default) clockwise through a full turn, stopping, settling and checking the
 camera at each step; if the marker is still not found it drives (A*) to the next search
 location of the list and repeats; it stops as soon as the marker is seen. The estimate
 (averaged over a few frames) goes to the world model like ``detect_marker``'s.
+
+Settings: the profile's ``search:`` section (:class:`SearchSettings`: the locations, the
+turn step, the settle time); an arm-mounted camera is first pointed forward with the
+``arm.look`` pose. World model: :class:`SearchProgress` of the latest search under
+``search.progress``.
 """
 
 from __future__ import annotations
@@ -12,32 +17,64 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Generator
+from dataclasses import dataclass
 from typing import Any
 
 from mmexec.drivers.interfaces import Pose2D
-from mmexec.skills.base import FailureKind, Output, Param, SkillContext, SkillFailure, skill
-from mmexec.skills.fetch.common import (
-    WORLD_SEARCH,
-    SearchProgress,
-    fetch_profile,
-    named_base_pose,
-    pose_list,
+from mmexec.skills.base import (
+    FailureKind,
+    Output,
+    Param,
+    SkillContext,
+    SkillFailure,
+    SkillGen,
+    skill,
 )
-from mmexec.skills.fetch.detect import look
-from mmexec.skills.fetch.navigate import drive_path, rotate_by
+from mmexec.skills.manipulation.arm import arm_settings, move_named
+from mmexec.skills.navigation.navigate import drive_path, rotate_by
+from mmexec.skills.perception.detect import camera_settings, look
+from mmexec.skills.poses import base_pose, pose_list
 from mmexec.skills.primitives import brake
+from mmexec.skills.profile import declare_settings, setting
 
-__all__ = ["search"]
+__all__ = ["WORLD_SEARCH", "SearchProgress", "SearchSettings", "search", "search_settings"]
 
 log = logging.getLogger(__name__)
 
+WORLD_SEARCH = "search.progress"
+
+
+@dataclass(frozen=True)
+class SearchSettings:
+    """The ``search:`` section of a robot profile: where to search and how to look."""
+
+    locations: list[tuple[float, float, float]] = setting(
+        [], unit="m, m, rad", base_pose=True, doc="base poses [x, y, theta] in map visited in order by search")
+    step_deg: float = setting(30.0, unit="deg", ge=1, le=180, doc="turn between two views of a search")
+    settle_time: float = setting(0.2, unit="s", ge=0, doc="wait after a turn before looking")
+
+
+search_settings = declare_settings("search", SearchSettings, package=__name__,
+                                   doc="the search skill: locations, turn step, settle time")
+
+
+@dataclass
+class SearchProgress:
+    """What the latest search did: views captured, locations visited, where it found the
+    marker (map pose [x, y, theta]) or None."""
+
+    marker: int
+    views: int = 0
+    locations_visited: int = 0
+    found_at: tuple[float, float, float] | None = None
+
 
 def _locations(ctx: SkillContext, given: list[Any] | None) -> list[tuple[Pose2D, str]]:
-    raw = given if given else [list(p) for p in fetch_profile(ctx).search_locations]
+    raw = given if given else [list(p) for p in search_settings(ctx).locations]
     out = []
     for i, loc in enumerate(raw):
         if isinstance(loc, str):
-            out.append((named_base_pose(ctx, loc), loc))
+            out.append((base_pose(ctx, loc), loc))
         else:
             out.append((pose_list(loc, f"search: locations[{i}]"), f"search location {i + 1}"))
     return out
@@ -59,13 +96,13 @@ def _settle(ctx: SkillContext, seconds: float) -> Generator[None, None, None]:
     "search",
     params=[
         Param("marker", int, required=True, doc="ArUco id to search for"),
-        Param("step", float, unit="deg", doc="rotation step, clockwise (default: profile fetch.search_step_deg)"),
+        Param("step", float, unit="deg", doc="rotation step, clockwise (default: profile search.step_deg)"),
         Param("turn", float, unit="deg", default=360.0, doc="total rotation at each location"),
         Param("locations", list, doc="search locations after the current one: [x, y, theta] in map or "
-                                     "named poses (default, or an empty list: profile fetch.search_locations)"),
+                                     "named poses (default, or an empty list: profile search.locations)"),
         Param("max_locations", int, doc="visit at most this many locations from the list"),
-        Param("frames", int, doc="frames averaged once found (default: profile fetch.detect_frames)"),
-        Param("settle", float, unit="s", doc="wait after each step before capturing (default: profile fetch.settle_time)"),
+        Param("frames", int, doc="frames averaged once found (default: profile camera.detect_frames)"),
+        Param("settle", float, unit="s", doc="wait after each step before capturing (default: profile search.settle_time)"),
         Param("timeout", float, unit="s", default=300.0, doc="give up after this much clock time"),
     ],
     outputs=[
@@ -76,16 +113,16 @@ def _settle(ctx: SkillContext, seconds: float) -> Generator[None, None, None]:
 )
 def search(ctx: SkillContext, marker: int, step: float | None = None, turn: float = 360.0,
            locations: list[Any] | None = None, max_locations: int | None = None, frames: int | None = None,
-           settle: float | None = None, timeout: float = 300.0) -> Generator[None, None, dict[str, Any]]:
+           settle: float | None = None, timeout: float = 300.0) -> SkillGen:
     """Find marker ``marker``: check the camera; turn clockwise in steps through ``turn``
     degrees checking at each step; then go to the next search location and repeat; a
     location the planner finds no path to is skipped (``search_skipped``). EXECUTION
     "marker K not found ..." when every location was searched or skipped."""
-    prof = fetch_profile(ctx)
-    step_deg = prof.search_step_deg if step is None else step
+    prof = search_settings(ctx)
+    step_deg = prof.step_deg if step is None else step
     if not 1.0 <= step_deg <= 180.0 or not 0.0 <= turn <= 720.0:
         raise SkillFailure(FailureKind.PRECONDITION, f"search: step {step_deg:g} deg must be in 1..180 and turn in 0..720")
-    n_frames = prof.detect_frames if frames is None else frames
+    n_frames = camera_settings(ctx).detect_frames if frames is None else frames
     settle_s = prof.settle_time if settle is None else settle
     locs = _locations(ctx, locations)
     if max_locations is not None:
@@ -96,10 +133,8 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
     assert base is not None
     deadline = ctx.clock.now() + timeout
     # an arm-mounted camera must look forward first
-    look_pose = prof.arm.look
+    look_pose = arm_settings(ctx).look
     if look_pose is not None and ctx.robot.arm is not None:
-        from mmexec.skills.fetch.arm import move_named
-
         yield from move_named(ctx, look_pose)
     n_steps = math.floor(turn / step_deg + 1e-9)
     stops: list[tuple[Pose2D, str] | None] = [None] + list(locs)

@@ -1,6 +1,12 @@
-"""Marker detection for the fetch mission: capture a few frames, detect the requested
-ArUco marker, estimate its pose (IPPE + depth refinement, in ``map`` through the camera
-mount and the base pose) and average the frames (:mod:`mmexec.skills.perception`).
+"""Marker detection skills: capture a few frames, detect the requested ArUco marker,
+estimate its pose (IPPE + depth refinement, in ``map`` through the camera mount and the
+base pose) and average the frames (:mod:`mmexec.skills.perception`).
+
+Skill: ``detect_marker``; :func:`look` is the building block other skills use (search,
+approach). Settings: the profile's ``camera:`` section (:class:`CameraSettings`: the
+markers' dictionary and size, frames averaged). Every estimate goes to the world model
+(``ctx.world``) under ``perception.markers`` (:func:`markers`), the detector under
+``perception.detector``.
 
 Frames are expensive (a rendered frame in sim costs tens of milliseconds), so skills
 capture only when they need a view, and :func:`look` stops after the first frame when the
@@ -10,14 +16,23 @@ marker is not in it.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Generator
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from mmexec.drivers.interfaces import CameraFrame
-from mmexec.skills.base import FailureKind, Output, Param, SkillContext, SkillFailure, skill
-from mmexec.skills.fetch.common import MarkerEstimate, fetch_profile, markers
+from mmexec.skills.base import (
+    FailureKind,
+    Output,
+    Param,
+    SkillContext,
+    SkillFailure,
+    SkillGen,
+    skill,
+)
 from mmexec.skills.perception import (
     DetectorConfig,
     MarkerDetector,
@@ -25,24 +40,74 @@ from mmexec.skills.perception import (
     observe_markers,
 )
 from mmexec.skills.perception.markers import MarkerObservation, depth_plane_normal
+from mmexec.skills.profile import declare_settings, setting
 
-__all__ = ["detect_marker", "detector", "look"]
+__all__ = [
+    "WORLD_DETECTOR",
+    "WORLD_MARKERS",
+    "CameraSettings",
+    "MarkerEstimate",
+    "camera_settings",
+    "detect_marker",
+    "detector",
+    "emit_estimate",
+    "look",
+    "markers",
+]
 
 log = logging.getLogger(__name__)
 
-_DETECTOR_KEY = "fetch.detector"
+WORLD_MARKERS = "perception.markers"
+WORLD_DETECTOR = "perception.detector"
 
 #: Longest a skill waits for a camera frame before giving up [clock s].
 FRAME_TIMEOUT = 2.0
 
 
+@dataclass(frozen=True)
+class CameraSettings:
+    """The ``camera:`` section of a robot profile: the markers the camera looks for and
+    how many frames an estimate averages (the camera itself is ``robot.camera``)."""
+
+    marker_length: float = setting(0.045, unit="m", gt=0, doc="side of the marker's black square")
+    marker_dictionary: str = setting("DICT_4X4_50", doc="ArUco dictionary")
+    detect_frames: int = setting(3, ge=1, doc="frames averaged per detection")
+
+
+camera_settings = declare_settings("camera", CameraSettings, package=__name__,
+                                   doc="marker detection: the markers' dictionary and size, frames averaged")
+
+
+@dataclass(frozen=True)
+class MarkerEstimate:
+    """A marker's pose ``T_map_marker`` (4x4, map frame, OpenCV ArUco axes: z out of the
+    face), from ``samples`` observations, at clock time ``stamp`` [s], seen from
+    ``distance`` [m] (camera to marker, the closest of the samples)."""
+
+    marker: int
+    T_map_marker: np.ndarray
+    samples: int
+    stamp: float
+    distance: float
+
+    def as_list(self) -> list[float]:
+        """[x, y, z, yaw] of the marker in map [m, rad] (yaw of its outward normal)."""
+        T = self.T_map_marker
+        return [float(T[0, 3]), float(T[1, 3]), float(T[2, 3]), math.atan2(float(T[1, 2]), float(T[0, 2]))]
+
+
+def markers(ctx: SkillContext) -> dict[int, MarkerEstimate]:
+    """The world model's marker estimates by id (created on first use)."""
+    return ctx.world.setdefault(WORLD_MARKERS, {})
+
+
 def detector(ctx: SkillContext) -> MarkerDetector:
-    """The run's marker detector (kept in ``ctx.world``; built from the profile)."""
-    prof = fetch_profile(ctx)
-    det = ctx.world.get(_DETECTOR_KEY)
-    if det is None or det.config.marker_length != prof.marker_length or det.config.dictionary != prof.marker_dictionary:
-        det = MarkerDetector(DetectorConfig(dictionary=prof.marker_dictionary, marker_length=prof.marker_length))
-        ctx.world[_DETECTOR_KEY] = det
+    """The run's marker detector (kept in ``ctx.world``; built from the camera section)."""
+    cam = camera_settings(ctx)
+    det = ctx.world.get(WORLD_DETECTOR)
+    if det is None or det.config.marker_length != cam.marker_length or det.config.dictionary != cam.marker_dictionary:
+        det = MarkerDetector(DetectorConfig(dictionary=cam.marker_dictionary, marker_length=cam.marker_length))
+        ctx.world[WORLD_DETECTOR] = det
     return det
 
 
@@ -117,11 +182,18 @@ def look(ctx: SkillContext, marker: int, frames: int, *, record_all: bool = True
     return result
 
 
+def emit_estimate(ctx: SkillContext, est: MarkerEstimate) -> None:
+    """Write a ``marker_estimate`` event: marker, pose [x, y, z, yaw] in map [m, rad],
+    samples, distance [m] it was seen from."""
+    ctx.emit("marker_estimate", marker=est.marker, pose=[round(v, 4) for v in est.as_list()], samples=est.samples,
+             distance=round(est.distance, 3), node=ctx.node_path)
+
+
 @skill(
     "detect_marker",
     params=[
         Param("marker", int, required=True, doc="ArUco id of the item's marker"),
-        Param("frames", int, doc="frames to average (default: profile fetch.detect_frames)"),
+        Param("frames", int, doc="frames to average (default: profile camera.detect_frames)"),
         Param("max_distance", float, unit="m", doc="fail when the marker is seen only farther than this"),
     ],
     outputs=[
@@ -131,11 +203,11 @@ def look(ctx: SkillContext, marker: int, frames: int, *, record_all: bool = True
     needs=("camera",),
 )
 def detect_marker(ctx: SkillContext, marker: int, frames: int | None = None,
-                  max_distance: float | None = None) -> Generator[None, None, dict[str, Any]]:
+                  max_distance: float | None = None) -> SkillGen:
     """Detect marker ``marker`` in the current view, average its map pose over a few
-    frames, store it in the world model (``fetch.markers``) and output it. Fails with
+    frames, store it in the world model (``perception.markers``) and output it. Fails with
     PRECONDITION "marker K not in view" when the camera does not see it."""
-    n = frames if frames is not None else fetch_profile(ctx).detect_frames
+    n = frames if frames is not None else camera_settings(ctx).detect_frames
     if n < 1:
         raise SkillFailure(FailureKind.PRECONDITION, f"detect_marker: frames must be >= 1, got {n}")
     est = yield from look(ctx, marker, n)
@@ -144,6 +216,5 @@ def detect_marker(ctx: SkillContext, marker: int, frames: int | None = None,
     if max_distance is not None and est.distance > max_distance:
         raise SkillFailure(FailureKind.PRECONDITION,
                            f"marker {marker} seen at {est.distance:.2f} m, farther than {max_distance:g} m")
-    ctx.emit("marker_estimate", marker=marker, pose=[round(v, 4) for v in est.as_list()], samples=est.samples,
-             distance=round(est.distance, 3), node=ctx.node_path)
+    emit_estimate(ctx, est)
     return {"pose": est.as_list(), "distance": est.distance}

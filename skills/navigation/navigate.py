@@ -1,0 +1,357 @@
+"""Base navigation skills: grid A* on the robot's occupancy map inflated by its radius,
+then pure-pursuit path tracking within velocity and acceleration limits
+(:mod:`mmexec.skills.navigation`); turning in place and backing off in a straight line.
+
+Skills: ``navigate`` (to a named base pose or x/y/theta) and ``back_off`` (straight
+backwards). The building blocks other skills use: :func:`drive_path`, :func:`rotate_by`,
+:func:`back_off_by` and :func:`costmap`. Every motion runs the base's motion loop
+(:func:`mmexec.skills.primitives.motion_loop`: a fault or a timeout brakes and fails, a
+cancel brakes). ``drive_path`` emits the seed's base states as ``base_status`` events:
+``to_goal`` when a path was found and the base starts moving, ``goal_ok`` on arrival,
+``goal_fail`` when there is no path or the motion failed, ``idle`` once the base is at
+rest again.
+
+Settings: the profile's ``nav:`` section (:class:`NavSettings`: speed and acceleration
+limits, the map's extra inflation, goal tolerances, the default timeout, and the
+stand-off settings ``approach`` reads). World model: the inflated map under
+``nav.costmap``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Generator, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from mmexec.config.yamlload import Mark, Problems, mark_of
+from mmexec.drivers.geometry import wrap_angle
+from mmexec.drivers.interfaces import Base, BaseState, Pose2D
+from mmexec.skills.base import (
+    FailureKind,
+    Output,
+    Param,
+    SkillContext,
+    SkillFailure,
+    SkillGen,
+    skill,
+)
+from mmexec.skills.navigation import (
+    CostMap,
+    PathTracker,
+    TrackerConfig,
+    inflate,
+    plan_path,
+    simplify_path,
+)
+from mmexec.skills.poses import base_pose
+from mmexec.skills.primitives import Step, motion_loop
+from mmexec.skills.profile import PROFILE, declare_settings, setting
+
+__all__ = [
+    "WORLD_COSTMAP",
+    "NavSettings",
+    "back_off",
+    "back_off_by",
+    "base_status",
+    "costmap",
+    "drive_path",
+    "nav_margin",
+    "nav_settings",
+    "navigate",
+    "rotate_by",
+]
+
+log = logging.getLogger(__name__)
+
+WORLD_COSTMAP = "nav.costmap"
+
+
+# --------------------------------------------------------------------------- profile
+
+
+@dataclass(frozen=True)
+class NavSettings:
+    """The ``nav:`` section of a robot profile: base motion (speed limits and
+    accelerations, extra inflation of the map, goal tolerances, pure pursuit lookahead,
+    the default navigation timeout, the goal search radius) and the stand-off in front of
+    a marker that ``approach`` drives to (see each setting's doc)."""
+
+    max_v: float = setting(0.5, unit="m/s", gt=0, doc="linear speed limit")
+    max_w: float = setting(1.5, unit="rad/s", gt=0, doc="angular speed limit")
+    accel_v: float = setting(0.8, unit="m/s^2", gt=0, doc="linear acceleration limit")
+    accel_w: float = setting(3.0, unit="rad/s^2", gt=0, doc="angular acceleration limit")
+    margin: float = setting(0.03, unit="m", ge=0, doc="inflation of the map on top of the base's footprint radius")
+    goal_tolerance: float = setting(0.04, unit="m", gt=0, doc="position tolerance at the goal")
+    heading_tolerance: float = setting(0.04, unit="rad", gt=0, doc="heading tolerance at the goal")
+    lookahead: float = setting(0.35, unit="m", gt=0, doc="pure pursuit lookahead")
+    timeout: float = setting(90.0, unit="clock s", gt=0, doc="default navigation timeout")
+    goal_search: float = setting(0.3, unit="m", ge=0, doc=(
+        "a goal that an obstacle covers (in the inflated map) is moved to the nearest free point within "
+        "this distance, like a global planner's goal tolerance (0: fail instead)"))
+    approach_distances: list[float] = setting(
+        [0.35, 0.45, 0.55], unit="m", gt=0,
+        doc="approach: stand-off distances from the marker face, tried in order (a recovery indexes them)")
+    refine_at: float = setting(0.8, unit="m", gt=0, doc=(
+        "approach: the base's stand-off from the marker face where it looks again when the estimate was "
+        "seen from afar (a wrist camera ahead of the base needs it farther than a head camera does)"))
+    redetect_at_standoff: bool = setting(False, doc=(
+        "approach: look at the marker once more from the stand-off pose reached and keep that estimate "
+        "(for a pick)"))
+
+    def validate(self) -> list[str]:
+        """Checks that relate several settings (single-value ranges are declared)."""
+        if not self.approach_distances:
+            return ["approach_distances: expected a non-empty list of distances > 0 m"]
+        return []
+
+
+nav_settings = declare_settings("nav", NavSettings, package=__name__,
+                                doc="base navigation: speed limits, inflation, tolerances, stand-offs")
+
+
+def nav_margin(profile: Mapping[str, Any]) -> float:
+    """The margin [m] navigation adds to the base's footprint radius when it inflates the
+    map: ``nav.margin``, or its default when the profile has no (valid) nav section
+    (for ``mmexec validate``, which reports the section's problems itself)."""
+    raw = profile.get("nav")
+    if raw is not None:
+        out = PROFILE.bind_section("nav", raw, mark_of(raw, Mark("<profile>", 1, 1)), Problems())
+        if isinstance(out, NavSettings):
+            return out.margin
+    return NavSettings().margin
+
+
+def base_status(ctx: SkillContext, status: str, **fields: Any) -> None:
+    """Emit the seed's base state: ``to_goal``, ``goal_ok``, ``goal_fail`` or ``idle``."""
+    ctx.emit("base_status", status=status, node=ctx.node_path, **fields)
+
+
+# --------------------------------------------------------------------------- motions
+
+
+def costmap(ctx: SkillContext) -> CostMap:
+    """The robot's occupancy map inflated by the base radius plus the profile's margin,
+    cached in the world model until the map or the radius changes."""
+    robot = ctx.robot
+    if robot.occupancy is None:
+        raise SkillFailure(FailureKind.PRECONDITION,
+                           "navigation needs a map: this robot has no occupancy grid (robot.map in the config)")
+    base = robot.base
+    assert base is not None
+    margin = nav_settings(ctx).margin
+    key = (id(robot.occupancy), base.radius, margin)
+    cached = ctx.world.get(WORLD_COSTMAP)
+    if cached is not None and cached[0] == key and cached[1].grid is robot.occupancy:
+        return cached[1]
+    cm = inflate(robot.occupancy, base.radius, margin)
+    ctx.world[WORLD_COSTMAP] = (key, cm)
+    return cm
+
+
+def _tracker_config(ctx: SkillContext, base: Base, max_v: float | None) -> TrackerConfig:
+    """The profile's limits and tolerances, within the base's own limits (``max_v``
+    [m/s]: a lower speed limit for this motion)."""
+    nav = nav_settings(ctx)
+    return TrackerConfig(
+        max_v=min(max_v or nav.max_v, base.max_linear), max_w=min(nav.max_w, base.max_angular),
+        accel_v=min(nav.accel_v, base.max_linear_accel), accel_w=min(nav.accel_w, base.max_angular_accel),
+        lookahead=nav.lookahead, goal_tolerance=nav.goal_tolerance, heading_tolerance=nav.heading_tolerance,
+    )
+
+
+def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, max_v: float | None = None,
+               path: list[tuple[float, float]] | None = None) -> Generator[None, None, Pose2D]:
+    """Plan (A*, unless ``path`` is given) from the base's pose to ``goal`` and track the
+    path, ending at ``goal.theta``. Emits base states. Failures: PLANNING "no path to
+    LABEL"; EXECUTION on a base fault (bumper, cliff, link) or after ``timeout`` clock
+    seconds. Cancellation brakes the base before re-raising. Returns the pose reached."""
+    base = ctx.robot.base
+    if base is None:
+        raise SkillFailure(FailureKind.PRECONDITION, "navigation needs a base, and this robot has none")
+    cm = costmap(ctx)
+    start = base.state().pose
+    if path is None:
+        search = nav_settings(ctx).goal_search
+        free = cm.nearest_free(goal.x, goal.y, search) if search > 0 else None
+        if free is not None and (free[0], free[1]) != (goal.x, goal.y):
+            moved = Pose2D(free[0], free[1], goal.theta)
+            log.info("%s: goal (%.2f, %.2f) is in collision; using (%.2f, %.2f), %.2f m away",
+                     label, goal.x, goal.y, moved.x, moved.y, goal.distance_to(moved))
+            ctx.emit("goal_adjusted", label=label, goal=[round(goal.x, 3), round(goal.y, 3)],
+                     used=[round(moved.x, 3), round(moved.y, 3)], shift=round(goal.distance_to(moved), 3),
+                     node=ctx.node_path)
+            goal = moved
+        if not cm.is_free(goal.x, goal.y):
+            base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="goal in collision")
+            base_status(ctx, "idle")
+            raise SkillFailure(FailureKind.PLANNING,
+                               f"no path to {label}: goal ({goal.x:.2f}, {goal.y:.2f}) is in collision or off the map"
+                               + (f", and no free point lies within {search:g} m" if search > 0 else ""))
+        path = plan_path(cm, (start.x, start.y), (goal.x, goal.y))
+        if path is None:
+            base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="no path")
+            base_status(ctx, "idle")
+            raise SkillFailure(FailureKind.PLANNING, f"no path to {label} ({goal.x:.2f}, {goal.y:.2f})")
+        path = simplify_path(cm, path)
+    # the grid path runs between cell centres: start and end exactly where the base and goal are
+    path = [(start.x, start.y)] + list(path[1:-1]) + [(goal.x, goal.y)] if len(path) > 1 else [(goal.x, goal.y)]
+    tracker = PathTracker(path, _tracker_config(ctx, base, max_v), goal_heading=goal.theta)
+    base_status(ctx, "to_goal", goal=[round(goal.x, 3), round(goal.y, 3), round(goal.theta, 3)], label=label)
+    t_end = ctx.clock.now() + timeout
+    last = ctx.clock.now()
+
+    def step(st: BaseState, now: float) -> tuple[float, float] | Step:
+        """The tracker's command, once per clock step (none while the clock stands)."""
+        nonlocal last
+        dt = now - last
+        if dt <= 0:
+            return Step.HOLD
+        last = now
+        v, w, done = tracker.step(st.pose, st.v, st.w, dt)
+        return Step.ARRIVED if done else (v, w)
+
+    try:
+        yield from motion_loop(ctx, base, step, fault=f"base fault on the way to {label}", deadline=t_end,
+                               timeout=f"not at {label} after {timeout:g} s",
+                               on_failure=lambda reason: base_status(ctx, "goal_fail", reason=reason))
+        reached = base.state().pose
+        base_status(ctx, "goal_ok", pose=[round(reached.x, 3), round(reached.y, 3), round(reached.theta, 3)])
+        return reached
+    finally:
+        base_status(ctx, "idle")
+
+
+def rotate_by(ctx: SkillContext, angle: float, *, timeout: float = 20.0) -> Generator[None, None, Pose2D]:
+    """Turn in place by ``angle`` [rad] (negative: clockwise) on the odometry heading,
+    within the profile's angular speed and acceleration limits; brake to rest at the end.
+    EXECUTION failure on a base fault or after ``timeout`` clock seconds."""
+    base = ctx.robot.base
+    assert base is not None
+    cfg = _tracker_config(ctx, base, None)
+    target = wrap_angle(base.state().pose.theta + angle)
+    t_end = ctx.clock.now() + timeout
+    w_cmd = base.state().w
+    last = ctx.clock.now()
+
+    def step(st: BaseState, now: float) -> tuple[float, float] | Step:
+        """Ramp the turn rate (within the angular acceleration) to the fastest that still
+        stops at the target."""
+        nonlocal w_cmd, last
+        err = wrap_angle(target - st.pose.theta)
+        if abs(err) <= cfg.heading_tolerance:
+            return Step.ARRIVED
+        dt = max(now - last, 1e-3)
+        last = now
+        w_stop = math.sqrt(2.0 * cfg.accel_w * 0.8 * abs(err))
+        w_des = math.copysign(max(min(cfg.max_w, w_stop), 0.1), err)
+        dw = cfg.accel_w * dt
+        w_cmd = max(w_cmd - dw, min(w_cmd + dw, w_des))
+        return 0.0, w_cmd
+
+    yield from motion_loop(ctx, base, step, fault="base fault while turning", deadline=t_end,
+                           timeout=f"turn of {math.degrees(angle):.0f} deg not done after {timeout:g} s")
+    return base.state().pose
+
+
+def back_off_by(ctx: SkillContext, distance: float, *, speed: float = 0.2,
+                timeout: float = 15.0) -> Generator[None, None, Pose2D]:
+    """Drive straight backwards ``distance`` [m] on odometry, within the acceleration
+    limit; brake to rest at the end. With a map, and starting from a free pose, only as
+    far as the line behind stays free in the inflated map (the base did not necessarily
+    arrive along it: an obstacle beside the stand-off can lie behind it), logged as
+    ``back_off_shortened``. ``speed`` [m/s] is the top speed. EXECUTION failure on a base
+    fault or after ``timeout`` clock seconds. Returns the pose reached."""
+    base = ctx.robot.base
+    assert base is not None
+    start = base.state().pose
+    if ctx.robot.occupancy is not None and distance > 0:
+        cm = costmap(ctx)
+        if cm.is_free(start.x, start.y):
+            ds, free, d = 0.5 * cm.resolution, 0.0, 0.0
+            while d < distance:
+                d = min(distance, d + ds)
+                if not cm.is_free(start.x - d * math.cos(start.theta), start.y - d * math.sin(start.theta)):
+                    break
+                free = d
+            if free < distance:
+                ctx.emit("back_off_shortened", asked=round(distance, 3), used=round(free, 3), node=ctx.node_path)
+                distance = free
+    if distance <= 0.005:
+        return start
+    t_end = ctx.clock.now() + timeout
+
+    def step(st: BaseState, _now: float) -> tuple[float, float] | Step:
+        """Backwards, slowing down (within the acceleration) to stop at the distance."""
+        left = distance - start.distance_to(st.pose)
+        if left <= 0.005:
+            return Step.ARRIVED
+        v = min(speed, math.sqrt(2.0 * base.max_linear_accel * 0.5 * left))
+        return -max(v, 0.02), 0.0
+
+    yield from motion_loop(ctx, base, step, fault="base fault while backing off", deadline=t_end,
+                           timeout=f"backing off {distance:g} m not done after {timeout:g} s")
+    return base.state().pose
+
+
+def _goal_from_params(ctx: SkillContext, goal: str | None, x: float | None, y: float | None,
+                      theta: float | None) -> tuple[Pose2D, str]:
+    if goal is not None:
+        if x is not None or y is not None or theta is not None:
+            raise SkillFailure(FailureKind.PRECONDITION, "navigate: give either 'goal' or x/y/theta, not both")
+        return base_pose(ctx, goal), goal
+    if x is None or y is None:
+        raise SkillFailure(FailureKind.PRECONDITION, "navigate: give 'goal' (a named pose) or 'x' and 'y'")
+    base = ctx.robot.base
+    assert base is not None
+    th = theta if theta is not None else base.state().pose.theta
+    return Pose2D(x, y, th), f"({x:.2f}, {y:.2f})"
+
+
+@skill(
+    "navigate",
+    params=[
+        Param("goal", str, doc="named base pose: 'home', a profile 'places' key or one a skill package adds "
+                               "(the fetch package's 'depot')"),
+        Param("x", float, unit="m", doc="goal x in map (instead of 'goal')"),
+        Param("y", float, unit="m", doc="goal y in map"),
+        Param("theta", float, unit="rad", doc="goal heading in map (default: current heading)"),
+        Param("max_speed", float, unit="m/s", doc="lower the profile's speed limit"),
+        Param("timeout", float, unit="s", doc="fail after this much clock time (default: profile nav.timeout)"),
+    ],
+    outputs=[Output("pose", list, doc="[x, y, theta] reached, map frame [m, m, rad]")],
+    needs=("base",),
+)
+def navigate(ctx: SkillContext, goal: str | None = None, x: float | None = None, y: float | None = None,
+             theta: float | None = None, max_speed: float | None = None, timeout: float | None = None) -> SkillGen:
+    """Drive the base to a named pose or x/y/theta: A* on the occupancy map inflated by
+    the robot radius, then path tracking. PLANNING "no path to ..." when A* finds none;
+    EXECUTION on a bumper or other base fault, or on timeout."""
+    pose, label = _goal_from_params(ctx, goal, x, y, theta)
+    limit = timeout if timeout is not None else nav_settings(ctx).timeout
+    reached = yield from drive_path(ctx, pose, label, timeout=limit, max_v=max_speed)
+    return {"pose": [reached.x, reached.y, reached.theta]}
+
+
+@skill(
+    "back_off",
+    params=[
+        Param("distance", float, unit="m", required=True, doc="how far to drive straight backwards"),
+        Param("speed", float, unit="m/s", default=0.2, doc="top speed"),
+        Param("timeout", float, unit="s", default=15.0, doc="fail after this much clock time"),
+    ],
+    outputs=[Output("pose", list, doc="[x, y, theta] reached, map frame [m, m, rad]")],
+    needs=("base",),
+)
+def back_off(ctx: SkillContext, distance: float, speed: float = 0.2, timeout: float = 15.0) -> SkillGen:
+    """Drive straight backwards ``distance`` [m] on odometry (away from a shelf before the
+    arm folds), with a map only as far as the line behind stays free in the inflated map
+    (``back_off_shortened``). EXECUTION on a base fault or on timeout."""
+    if not (math.isfinite(distance) and math.isfinite(speed) and math.isfinite(timeout)) \
+            or distance < 0 or speed <= 0 or timeout <= 0:
+        raise SkillFailure(FailureKind.PRECONDITION,
+                           f"back_off: distance must be >= 0 m and speed, timeout > 0, got {distance:g} m, "
+                           f"{speed:g} m/s, {timeout:g} s")
+    reached = yield from back_off_by(ctx, distance, speed=speed, timeout=timeout)
+    return {"pose": [reached.x, reached.y, reached.theta]}
