@@ -92,8 +92,12 @@ class GraspPointConfig:
     ``centre_window``: side of the window around the grasp pixel whose median depth is
     taken, as a fraction of the box's sides (at least 3 px). ``min_valid``: valid depths
     the window needs (it doubles, up to the whole box, until it has them).
-    ``depth_range`` [m]: depths outside are holes. ``box_margin``: fraction of the box's
-    sides dropped at each edge before taking object points. ``edge_jump`` [m]: a pixel
+    ``depth_range`` [m]: depths outside are holes. ``box_grow``: fraction of the box's
+    sides added at each edge before taking object points, for a detector's box that cuts
+    the object, when the item's size is known (the support plane then comes from the
+    object's top and drops what the growth adds; without the size, the lowest points
+    would be the grown box's surroundings, so the box is taken as given); negative
+    values remove a margin in both cases. ``edge_jump`` [m]: a pixel
     whose depth differs from a 4-neighbour's by more is a mixed pixel and dropped.
     ``support_margin`` [m]: points less high above the support are the support.
     ``min_points``: fewer object points is no grasp. ``trim``: fraction of the points
@@ -104,7 +108,7 @@ class GraspPointConfig:
     centre_window: float = 0.2
     min_valid: int = 5
     depth_range: tuple[float, float] = (0.1, 5.0)
-    box_margin: float = 0.0
+    box_grow: float = 0.1
     edge_jump: float = 0.02
     support_margin: float = 0.01
     min_points: int = 30
@@ -120,8 +124,10 @@ class GraspPointConfig:
             errs.append(f"min_valid, min_points: must be >= 1 and >= 3, got {self.min_valid}, {self.min_points}")
         if not 0 < self.depth_range[0] < self.depth_range[1]:
             errs.append(f"depth_range: must be 0 < near < far m, got {self.depth_range}")
-        if not 0 <= self.box_margin < 0.5 or not 0 <= self.trim < 0.5:
-            errs.append(f"box_margin, trim: must be in [0, 0.5), got {self.box_margin}, {self.trim}")
+        if not -0.5 < self.box_grow <= 1.0:
+            errs.append(f"box_grow: must be in (-0.5, 1], got {self.box_grow}")
+        if not 0 <= self.trim < 0.5:
+            errs.append(f"trim: must be in [0, 0.5), got {self.trim}")
         if not (self.edge_jump > 0 and self.support_margin >= 0 and self.square_tolerance >= 0):
             errs.append("edge_jump must be > 0 m, support_margin >= 0 m, square_tolerance >= 0")
         return errs
@@ -367,9 +373,11 @@ def estimate_grasp(
     T_mc = _camera_in_map(frame)
     surface = T_mc[:3, :3] @ back_project(px, z_c, K) + T_mc[:3, 3]
 
-    # object points: inside the box less its margin, no mixed pixels, within the object's extent in depth
-    mx, my = round(cfg.box_margin * (x1 - x0 + 1)), round(cfg.box_margin * (y1 - y0 + 1))
-    bx0, by0, bx1, by1 = x0 + mx, y0 + my, x1 - mx, y1 - my
+    # object points: inside the grown box, no mixed pixels, within the object's extent in depth
+    grow = cfg.box_grow if size is not None else min(cfg.box_grow, 0.0)
+    mx, my = round(grow * (x1 - x0 + 1)), round(grow * (y1 - y0 + 1))
+    H, W = depth.shape[:2]
+    bx0, by0, bx1, by1 = max(x0 - mx, 0), max(y0 - my, 0), min(x1 + mx, W - 1), min(y1 + my, H - 1)
     patch = depth[by0 : by1 + 1, bx0 : bx1 + 1]
     reach = math.sqrt(sum(s * s for s in size)) if size is not None else math.hypot(
         (x1 - x0 + 1) * z_c / K.fx, (y1 - y0 + 1) * z_c / K.fy)
