@@ -23,6 +23,7 @@ import numpy as np
 __all__ = [
     "matrix_to_quat",
     "planar_transform",
+    "position_quat",
     "quat_to_matrix",
     "rigid_fit",
     "rot_x",
@@ -131,6 +132,12 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
     qa = np.array(q)
     qa /= np.linalg.norm(qa)
     return qa if qa[3] >= 0 else -qa
+
+
+def position_quat(T: np.ndarray) -> tuple[list[float], list[float]]:
+    """A 4x4 transform as position [m] and unit quaternion (x, y, z, w), plain floats (the
+    form pybullet takes a pose in)."""
+    return [float(v) for v in T[:3, 3]], [float(v) for v in matrix_to_quat(T[:3, :3])]
 
 
 def quat_to_matrix(q: Sequence[float]) -> np.ndarray:

@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 import pybullet as p
 
+from mmexec.drivers.geometry import position_quat, wrap_angle
 from mmexec.drivers.interfaces import (
     Arm,
     Base,
@@ -77,10 +78,6 @@ def _mat(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
     return T
 
 
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2 * math.pi) - math.pi
-
-
 @dataclass
 class SimCore:
     """State shared by the capabilities of one simulated robot."""
@@ -115,7 +112,7 @@ class SimCore:
                 step = pose.matrix() @ np.linalg.inv(self._placed.matrix())
                 ipos, iorn = p.getBasePositionAndOrientation(self.held_body, physicsClientId=self.cid)
                 T = step @ _mat(ipos, iorn)
-                p.resetBasePositionAndOrientation(self.held_body, *_pose7(T), physicsClientId=self.cid)
+                p.resetBasePositionAndOrientation(self.held_body, *position_quat(T), physicsClientId=self.cid)
             self._placed = pose
 
     def link_T(self, name: str) -> np.ndarray:
@@ -257,7 +254,7 @@ class SimBase(Base):
             for pt in p.getClosestPoints(c.body, c.scene.static, 0.0, linkIndexA=li, physicsClientId=c.cid):
                 if pt[8] < -1e-4:
                     d = np.array(pt[5]) - np.array([c.true_pose.x, c.true_pose.y, 0.0])
-                    return True, _wrap(math.atan2(d[1], d[0]) - c.true_pose.theta)
+                    return True, wrap_angle(math.atan2(d[1], d[0]) - c.true_pose.theta)
         return False, 0.0
 
     def update(self, dt: float) -> None:
@@ -274,7 +271,7 @@ class SimBase(Base):
         c = self._c
         old = c.true_pose
         th = old.theta + self._w * dt / 2
-        new = Pose2D(old.x + self._v * dt * math.cos(th), old.y + self._v * dt * math.sin(th), _wrap(old.theta + self._w * dt))
+        new = Pose2D(old.x + self._v * dt * math.cos(th), old.y + self._v * dt * math.sin(th), wrap_angle(old.theta + self._w * dt))
         c.true_pose = new  # the body follows lazily (SimCore.sync)
         hit, ang = False, 0.0
         if c.clearance is None or not c.clearance.clear(new.x, new.y, self.bump_radius):
@@ -300,7 +297,7 @@ class SimBase(Base):
             dth_m = dth_m * self._gyro_scale + self._gyro_bias * dt
         e = self._est
         eth = e.theta + dth_m / 2
-        self._est = Pose2D(e.x + ds_m * math.cos(eth), e.y + ds_m * math.sin(eth), _wrap(e.theta + dth_m))
+        self._est = Pose2D(e.x + ds_m * math.cos(eth), e.y + ds_m * math.sin(eth), wrap_angle(e.theta + dth_m))
 
 
 # --------------------------------------------------------------------------- arm
@@ -595,7 +592,7 @@ class SimGripper(Gripper):
         hold = self.friction * self._force
         if along > self.slip_offset:
             hold = 0.3 * mass * 9.81
-        pos7, quat7 = _pose7(rel)
+        pos7, quat7 = position_quat(rel)
         self._cons = p.createConstraint(c.body, tool, body, -1, p.JOINT_FIXED, [0, 0, 0], pos7, [0, 0, 0],
                                         parentFrameOrientation=quat7, physicsClientId=c.cid)
         p.changeConstraint(self._cons, maxForce=hold, physicsClientId=c.cid)
@@ -675,12 +672,6 @@ class SimGripper(Gripper):
         assert self._hold_T is not None
         if np.linalg.norm(rel[:3, 3] - self._hold_T[:3, 3]) > 0.015:
             self._release(GraspState.DROPPED)
-
-
-def _pose7(T: np.ndarray) -> tuple[list[float], list[float]]:
-    from mmexec.sim.scene import quat_of
-
-    return T[:3, 3].tolist(), list(quat_of(T))
 
 
 # --------------------------------------------------------------------------- sensors

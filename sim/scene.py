@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pybullet as p
 
-from mmexec.drivers.geometry import matrix_to_quat
+from mmexec.drivers.geometry import position_quat
 from mmexec.sim.markers import QUIET_RATIO, marker_texture_path
 from mmexec.sim.world import World
 
@@ -27,7 +27,6 @@ __all__ = [
     "GROUP_QUERY",
     "GROUP_STATIC",
     "SceneHandles",
-    "quat_of",
     "spawn_world",
     "yaw_of",
 ]
@@ -62,12 +61,6 @@ class SceneHandles:
     static_names: tuple[str, ...]
     floor: int
     items: Mapping[str, int]
-
-
-def quat_of(T: np.ndarray) -> tuple[float, float, float, float]:
-    """(x, y, z, w) quaternion of the rotation part of a 4x4 transform."""
-    x, y, z, w = (float(v) for v in matrix_to_quat(T[:3, :3]))
-    return (x, y, z, w)
 
 
 def yaw_of(T: np.ndarray) -> float:
@@ -117,7 +110,7 @@ def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float
         dy, dz = bias.get(it.name, (0.0, 0.0))
         body = p.createMultiBody(
             baseMass=it.mass, baseCollisionShapeIndex=col, baseVisualShapeIndex=vis,
-            basePosition=T[:3, 3].tolist(), baseOrientation=quat_of(T),
+            basePosition=T[:3, 3].tolist(), baseOrientation=position_quat(T)[1],
             linkMasses=[0.0], linkCollisionShapeIndices=[-1], linkVisualShapeIndices=[quad],
             linkPositions=[[half[0] + 0.0005, dy, dz]], linkOrientations=[[0, 0, 0, 1]],
             linkInertialFramePositions=[[0, 0, 0]], linkInertialFrameOrientations=[[0, 0, 0, 1]],
@@ -149,7 +142,7 @@ def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float
         cols.append(col)
         viss.append(vis)
         poss.append(T[:3, 3].tolist())
-        orns.append(quat_of(T))
+        orns.append(position_quat(T)[1])
     n = len(names)
     static = p.createMultiBody(
         baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=-1, basePosition=[0, 0, 0],

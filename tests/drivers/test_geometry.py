@@ -11,6 +11,7 @@ import pytest
 from mmexec.drivers.geometry import (
     matrix_to_quat,
     planar_transform,
+    position_quat,
     quat_to_matrix,
     rigid_fit,
     rot_x,
@@ -73,6 +74,9 @@ def test_quaternions_round_trip_on_every_branch() -> None:
     # a 4x4 transform's rotation part is read as is
     T = xyz_rpy_transform((1.0, 0.0, 0.0), (0.1, 0.2, 0.3))
     assert np.allclose(matrix_to_quat(T), matrix_to_quat(T[:3, :3]))
+    pos, quat = position_quat(T)
+    assert pos == [1.0, 0.0, 0.0] and all(type(v) is float for v in pos + quat)
+    assert np.allclose(quat_to_matrix(quat), T[:3, :3])
 
 
 def test_rigid_fit_recovers_a_2d_and_a_3d_motion() -> None:
