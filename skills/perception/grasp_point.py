@@ -15,9 +15,10 @@ the grasp pixel becomes the mean of the predicted and clicked pixels (IV-E, Fig.
    outside ``depth_range`` dropped; the window grows up to the box when too few are
    valid), back-projected with the intrinsics and moved to ``map`` through
    ``T_map_base @ T_base_camera``.
-2. **Object points**: the pixels inside the box (less a margin), without mixed pixels
-   (a jump over ``edge_jump`` to a neighbour), within the object's extent of the surface
-   depth, back-projected to ``map``. Support: the plane ``z = top - height`` when the
+2. **Object points**: the pixels inside the box (grown by ``box_grow`` when the item's
+   size is known, as a detector's box may cut the item), without mixed pixels (a jump
+   over ``edge_jump`` to a neighbour), within the object's extent of the surface depth,
+   back-projected to ``map``. Support: the plane ``z = top - height`` when the
    item's size is known (catalogue), else the lowest points; points less than
    ``support_margin`` above it are the support, not the object. The support plane is
    horizontal in ``map`` (z up): tables, shelf boards, the floor.
