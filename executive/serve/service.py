@@ -39,7 +39,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from mmexec.drivers.interfaces import CameraFrame, LaserScan, Robot
 from mmexec.executive.eventlog import to_jsonable
@@ -51,12 +51,17 @@ from mmexec.skills.operator import OPERATOR_KEY
 __all__ = [
     "TOPICS",
     "WORLD_PATH",
+    "CameraSample",
+    "ConsoleSink",
     "Hub",
     "QueuedRequest",
     "ServeRunner",
     "Service",
     "ServiceError",
+    "StreamSink",
+    "Streams",
     "TreeView",
+    "console_message",
 ]
 
 log = logging.getLogger(__name__)
@@ -491,6 +496,203 @@ def _finite_or_none(values: Iterable[float]) -> list[float | None]:
     return [float(x) if math.isfinite(x) else None for x in values]
 
 
+@dataclass(frozen=True)
+class CameraSample:
+    """A camera frame as the streams carry it: the frame and its JPEG bytes (quality
+    :data:`STREAM_JPEG_QUALITY`), encoded once for every sink."""
+
+    frame: CameraFrame
+    jpeg: bytes
+
+
+class StreamSink(Protocol):
+    """Where :class:`Streams` sends messages: the console (:class:`ConsoleSink`), a Foxglove
+    server or an MCAP recording (:mod:`mmexec.executive.recording`). Called in the tick
+    thread only; each call returns promptly."""
+
+    def refresh(self, t: float) -> bool:
+        """Once per tick (and while a service idles), before anything is sent, at clock
+        time ``t`` [s]; True when a viewer that just joined needs the whole tree."""
+
+    def wants(self, topic: str, t: float) -> bool:
+        """Whether to send it a ``topic`` message now (its subscriptions, its rates)."""
+
+    def send(self, topic: str, data: Any, t: float) -> None:
+        """One message at clock time ``t`` [s]. ``data`` by topic: ``event`` the event-log
+        record, ``tree`` a :meth:`TreeView.snapshot`, ``pose`` the base's
+        :class:`~mmexec.drivers.interfaces.BaseState`, ``path`` a list of (x, y) in ``map``
+        [m], ``map`` the :class:`~mmexec.drivers.interfaces.OccupancyGrid`, ``scan`` a
+        :class:`~mmexec.drivers.interfaces.LaserScan`, ``camera`` a :class:`CameraSample`."""
+
+
+class Streams:
+    """The live state of a run as stream messages, read in the tick thread and handed to
+    every :class:`StreamSink` that wants them: each event-log record (``event``), the
+    tree's statuses (``tree``: at request start, once per tick with changes, before
+    ``request_end``), and from the robot the ``map`` (once), ``pose``, ``path``
+    (``world[WORLD_PATH]`` when replaced), ``scan`` and ``camera``.
+
+    Sensors are tapped (:class:`_Tap`) on a stepped clock, and on any clock when
+    :attr:`tap` is set (a recording asks for it): the streams then carry the newest
+    reading a skill took and never read a device themselves, so a seeded run does the same
+    with or without anyone watching. Untapped (a wall clock), a sensor is read when a sink
+    wants it. Attach with :meth:`Runner.add_log_listener` (:meth:`on_record`) and call
+    :meth:`start` once the robot is up, then :meth:`publish` before every tick.
+    """
+
+    def __init__(self, world: Mapping[str, Any]) -> None:
+        self.world = world
+        self.tree = TreeView()
+        self.sinks: list[StreamSink] = []
+        #: tap the camera and lidar on a wall clock too (what a recording needs)
+        self.tap = False
+        self._last_path: Any = None
+        self._taps: dict[str, _Tap] = {}  # what the skills read, by topic
+        self._shown: dict[str, int] = {}  # the tap's read count last sent
+
+    def add_sink(self, sink: StreamSink) -> None:
+        self.sinks.append(sink)
+
+    def start(self, robot: Robot) -> None:
+        """Once the robot is up, before its first tick: tap its sensors (see the class
+        doc) and send the map."""
+        if robot.clock.stepped or self.tap:
+            if robot.camera is not None:
+                robot.camera = self._taps.setdefault("camera", _CameraTap(robot.camera))  # type: ignore[assignment]
+            if robot.lidar is not None:
+                robot.lidar = self._taps.setdefault("scan", _LidarTap(robot.lidar))  # type: ignore[assignment]
+        if robot.occupancy is not None:
+            self._send("map", robot.occupancy, robot.clock.now())
+
+    def on_record(self, record: dict[str, Any]) -> None:
+        """Event-log listener: the record as ``event``; the tree at request start and,
+        with its final statuses, before ``request_end``."""
+        ev = record.get("event")
+        t = record.get("t")
+        t = float(t) if isinstance(t, (int, float)) else self.tree.t
+        if ev == "request_end" and self.tree.changed:
+            self._send_tree(t)
+        self._send("event", record, t)
+        if self.tree.feed(record) and ev == "request_start":
+            self._send_tree(t)
+
+    def publish(self, robot: Robot) -> None:
+        """Before every tick (tick thread): the tree when it changed (or to a sink with a
+        new viewer), then pose, path, scan and camera to the sinks that want them now."""
+        now = robot.clock.now()
+        rejoined = [s for s in self.sinks if s.refresh(now)]  # every sink, every tick
+        if self.tree.changed:
+            self._send_tree(now)
+        elif rejoined and self.tree.order:
+            snap = self.tree.snapshot()
+            for s in rejoined:
+                if s.wants("tree", now):
+                    s.send("tree", snap, now)
+        if robot.base is not None and (sinks := self._wanting("pose", now)):
+            state = robot.base.state()
+            for s in sinks:
+                s.send("pose", state, now)
+        path = self.world.get(WORLD_PATH)
+        if path is not self._last_path:
+            self._last_path = path
+            self._send("path", [(float(x), float(y)) for x, y in path or []], now)
+        if robot.lidar is not None and (sinks := self._wanting("scan", now)):
+            scan = self._sensor("scan", robot.lidar.scan)
+            for s in sinks if scan is not None else ():
+                s.send("scan", scan, now)
+        if robot.camera is not None and (sinks := self._wanting("camera", now)):
+            frame = self._sensor("camera", robot.camera.frame)
+            if frame is not None:
+                import cv2
+
+                ok, buf = cv2.imencode(".jpg", frame.rgb[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, STREAM_JPEG_QUALITY])
+                if ok:
+                    sample = CameraSample(frame, bytes(buf))
+                    for s in sinks:
+                        s.send("camera", sample, now)
+
+    def _wanting(self, topic: str, t: float) -> list[StreamSink]:
+        return [s for s in self.sinks if s.wants(topic, t)]  # asks each one: rates are kept per sink
+
+    def _send(self, topic: str, data: Any, t: float) -> None:
+        for s in self._wanting(topic, t):
+            s.send(topic, data, t)
+
+    def _send_tree(self, t: float) -> None:
+        sinks = self._wanting("tree", t)
+        snap = self.tree.snapshot()  # resets the changed set, wanted or not
+        for s in sinks:
+            s.send("tree", snap, t)
+
+    def _sensor(self, topic: str, read: Callable[[], Any]) -> Any:
+        """The reading to send: where tapped the newest one a skill got (None when
+        nothing new), else a fresh ``read()``."""
+        tap = self._taps.get(topic)
+        if tap is None:
+            return read()
+        if tap.reads == self._shown.get(topic, 0):
+            return None
+        self._shown[topic] = tap.reads
+        return tap.latest
+
+
+def console_message(topic: str, data: Any, t: float) -> Any:
+    """The console stream's JSON ``data`` for a :class:`Streams` message (docs/console.md)."""
+    if topic == "pose":
+        return {"t": t, "x": data.pose.x, "y": data.pose.y, "theta": data.pose.theta, "v": data.v, "w": data.w}
+    if topic == "path":
+        return {"t": t, "points": [[x, y] for x, y in data]}
+    if topic == "map":
+        return {"width": data.width, "height": data.height, "resolution": data.resolution,
+                "origin": [data.origin.x, data.origin.y, data.origin.theta],
+                "data": base64.b64encode(data.data.astype("int8").tobytes()).decode("ascii")}
+    if topic == "scan":
+        return {"t": data.stamp, "angle_min": data.angle_min, "angle_increment": data.angle_increment,
+                "range_min": data.range_min, "range_max": data.range_max, "ranges": _finite_or_none(data.ranges)}
+    if topic == "camera":
+        h, w = data.frame.rgb.shape[:2]
+        return {"t": data.frame.stamp, "width": int(w), "height": int(h),
+                "jpeg": base64.b64encode(data.jpeg).decode("ascii")}
+    return data  # event records and tree snapshots are JSON already
+
+
+class ConsoleSink:
+    """The console's :class:`StreamSink`: messages to the service's :class:`Hub` as JSON,
+    pose, scan and camera at the ``serve:`` section's wall-clock rates, the status twice a
+    second; a client that joined gets the whole tree at the next tick."""
+
+    def __init__(self, service: Service) -> None:
+        self.service = service
+        self._joined = 0  # stream clients seen so far
+        self._due: dict[str, float] = {}
+
+    def refresh(self, t: float) -> bool:
+        hub = self.service.hub
+        joined = hub.joined != self._joined
+        self._joined = hub.joined
+        if self._is_due("status", STATUS_HZ):
+            hub.publish("status", self.service.status())
+        return joined
+
+    def wants(self, topic: str, t: float) -> bool:
+        if topic in ("map", "path"):
+            return True  # sticky: kept for the clients still to come
+        s = self.service.settings
+        hz = {"pose": s.pose_hz, "scan": s.scan_hz, "camera": s.camera_hz}.get(topic)
+        return self.service.hub.wants(topic) and (hz is None or self._is_due(topic, hz))
+
+    def send(self, topic: str, data: Any, t: float) -> None:
+        self.service.hub.publish(topic, console_message(topic, data, t))
+
+    def _is_due(self, topic: str, hz: float) -> bool:
+        """Rate limit [wall Hz]: True at most ``hz`` times a second per topic."""
+        now = time.monotonic()
+        if now < self._due.get(topic, 0.0):
+            return False
+        self._due[topic] = now + 1.0 / hz
+        return True
+
+
 class ServeRunner(Runner):
     """A :class:`Runner` whose requests come from a :class:`Service` until it is stopped
     (through the API, or by SIGINT / SIGTERM / SIGHUP with ``run``'s safety contract).
@@ -501,15 +703,12 @@ class ServeRunner(Runner):
         super().__init__(options, **kw)
         self.service = service
         self.world[OPERATOR_KEY] = service.prompts
-        self.tree = TreeView()
-        self._due: dict[str, float] = {}
-        self._last_path: Any = None
+        #: the live streams: to the console, and to Foxglove / MCAP sinks added before run()
+        self.streams = Streams(self.world)
+        self.streams.add_sink(ConsoleSink(service))
         self._period = 0.05
         self._request_id = 0  # the service id of the request being served
-        self._taps: dict[str, _Tap] = {}  # stepped clock: what the skills read, by topic
-        self._shown: dict[str, int] = {}  # the tap's read count last streamed
-        self._joined = 0  # stream clients seen so far
-        self.add_log_listener(self._on_record)
+        self.add_log_listener(self.streams.on_record)
         self.add_tick_hook(self._between_ticks)
 
     def prepare(self) -> None:
@@ -576,18 +775,7 @@ class ServeRunner(Runner):
         rate = self.options.rate_hz if self.options.rate_hz is not None else self.config.config.rate_hz
         self._period = 1.0 / rate
         self.service.set_info(backend=self.config.backend, log=str(self.log_path))
-        robot = self.robot
-        if robot.clock.stepped:  # stream what the skills read, never read for the stream
-            if robot.camera is not None:
-                robot.camera = self._taps.setdefault("camera", _CameraTap(robot.camera))  # type: ignore[assignment]
-            if robot.lidar is not None:
-                robot.lidar = self._taps.setdefault("scan", _LidarTap(robot.lidar))  # type: ignore[assignment]
-        grid = self.robot.occupancy
-        if grid is not None:
-            self.service.hub.publish("map", {
-                "width": grid.width, "height": grid.height, "resolution": grid.resolution,
-                "origin": [grid.origin.x, grid.origin.y, grid.origin.theta],
-                "data": base64.b64encode(grid.data.astype("int8").tobytes()).decode("ascii")})
+        self.streams.start(self.robot)  # taps the sensors, sends the map
 
     # tick thread: between ticks of a request, and while idle
     def _between_ticks(self, robot: Robot, period: float) -> None:
@@ -618,75 +806,16 @@ class ServeRunner(Runner):
         if cmds:
             self._publish_status()
 
-    def _on_record(self, record: dict[str, Any]) -> None:
-        hub = self.service.hub
-        ev = record.get("event")
-        if ev == "request_end" and self.tree.changed and hub.wants("tree"):  # the final statuses first
-            hub.publish("tree", self.tree.snapshot())
-        hub.publish("event", record)
-        if self.tree.feed(record) and ev == "request_start" and hub.wants("tree"):
-            hub.publish("tree", self.tree.snapshot())
-
     def _publish_status(self) -> None:
         self.service.hub.publish("status", self.service.status())
 
     def _publish(self, robot: Robot) -> None:
-        hub = self.service.hub
-        joined = hub.joined != self._joined  # a new client gets the whole tree as it is now
-        self._joined = hub.joined
-        if self.tree.changed or (joined and self.tree.order):
+        tree = self.streams.tree
+        if tree.changed:
             self.service.set_state(self.service.state, tip=self._tip())
-            if hub.wants("tree"):
-                hub.publish("tree", self.tree.snapshot())
-            else:
-                self.tree.changed = set()
-        s = self.service.settings
-        if self._is_due("status", STATUS_HZ):
-            self._publish_status()
-        if robot.base is not None and self._is_due("pose", s.pose_hz) and hub.wants("pose"):
-            st = robot.base.state()
-            hub.publish("pose", {"t": robot.clock.now(), "x": st.pose.x, "y": st.pose.y, "theta": st.pose.theta,
-                                 "v": st.v, "w": st.w})
-        path = self.world.get(WORLD_PATH)
-        if path is not self._last_path:
-            self._last_path = path
-            hub.publish("path", {"t": robot.clock.now(), "points": [[float(x), float(y)] for x, y in path or []]})
-        if robot.lidar is not None and hub.wants("scan") and self._is_due("scan", s.scan_hz):
-            scan = self._sensor("scan", robot.lidar.scan)
-            if scan is not None:
-                hub.publish("scan", {"t": scan.stamp, "angle_min": scan.angle_min,
-                                     "angle_increment": scan.angle_increment, "range_min": scan.range_min,
-                                     "range_max": scan.range_max, "ranges": _finite_or_none(scan.ranges)})
-        if robot.camera is not None and hub.wants("camera") and self._is_due("camera", s.camera_hz):
-            frame = self._sensor("camera", robot.camera.frame)
-            if frame is not None:
-                import cv2
-
-                ok, buf = cv2.imencode(".jpg", frame.rgb[:, :, ::-1], [cv2.IMWRITE_JPEG_QUALITY, STREAM_JPEG_QUALITY])
-                if ok:
-                    h, w = frame.rgb.shape[:2]
-                    hub.publish("camera", {"t": frame.stamp, "width": int(w), "height": int(h),
-                                           "jpeg": base64.b64encode(bytes(buf)).decode("ascii")})
-
-    def _sensor(self, topic: str, read: Callable[[], Any]) -> Any:
-        """The reading to stream: on a stepped clock the newest one a skill got (None
-        when nothing new), on a wall clock a fresh ``read()``."""
-        tap = self._taps.get(topic)
-        if tap is None:
-            return read()
-        if tap.reads == self._shown.get(topic, 0):
-            return None
-        self._shown[topic] = tap.reads
-        return tap.latest
+        self.streams.publish(robot)
 
     def _tip(self) -> str:
-        running = [p for p in self.tree.order if self.tree.status.get(p) == "RUNNING"]
+        tree = self.streams.tree
+        running = [p for p in tree.order if tree.status.get(p) == "RUNNING"]
         return running[-1] if running else ""
-
-    def _is_due(self, topic: str, hz: float) -> bool:
-        """Rate limit [wall Hz]: True at most ``hz`` times a second per topic."""
-        now = time.monotonic()
-        if now < self._due.get(topic, 0.0):
-            return False
-        self._due[topic] = now + 1.0 / hz
-        return True
