@@ -2,12 +2,9 @@
 
 A lab that builds a room like a sim world (``sim/worlds/*.yaml``) can run the real robot
 on the map and scene the sim uses: :func:`world_map` is the sim's own navigation grid
-(:meth:`mmexec.sim.world.World.occupancy`, nominal poses), :func:`write_map` saves an
-occupancy grid as a map_server map (YAML + 8-bit PGM, read back by
-:func:`mmexec.skills.navigation.grid.load_map`) with the world's laser reflectors under a
-``reflectors:`` key (name, centre ``position`` [x, y] in ``map`` [m], post ``radius`` [m];
-map_server ignores the key, :func:`mmexec.skills.localization.landmarks.load_reflectors`
-reads it), and :func:`scene_yaml` prints the
+(:meth:`mmexec.sim.world.World.occupancy`, nominal poses), :func:`mmexec.drivers.maps.write_map` saves it
+as a map_server map (YAML + 8-bit PGM) with the world's laser reflectors under a
+``reflectors:`` key, and :func:`scene_yaml` prints the
 world's static boxes (:meth:`~mmexec.sim.world.World.scene_boxes`) as ``robot.scene``
 entries of a run config. ``config/maps/lab.{yaml,pgm}`` were written by::
 
@@ -21,11 +18,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
-import re
 import sys
-from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
@@ -34,12 +28,11 @@ import numpy as np
 from mmexec.config.brokenpipe import detach_stdout
 from mmexec.config.yamlload import InputError, Mark
 from mmexec.drivers.interfaces import OccupancyGrid
-from mmexec.sim.world import Reflector, World, load_world
+from mmexec.drivers.maps import write_map, yaml_number
+from mmexec.sim.world import World, load_world
 
-__all__ = ["FREE", "OCCUPIED", "UNKNOWN", "pgm_bytes", "scene_yaml", "world_map", "write_map"]
+__all__ = ["scene_yaml", "world_map"]
 
-#: map_saver's pixel values (negate 0): occupied black, free white, unknown grey
-OCCUPIED, FREE, UNKNOWN = 0, 254, 205
 
 
 def _world(world: World | str | Path) -> World:
@@ -53,65 +46,6 @@ def world_map(world: World | str | Path, resolution: float = 0.05) -> OccupancyG
     return _world(world).occupancy(resolution)
 
 
-def pgm_bytes(grid: OccupancyGrid, comment: str = "") -> bytes:
-    """``grid`` as a binary PGM (P5, maxval 255) in map_server's layout: picture row 0 is
-    the grid's last row (the map's top). Values >= 50 are occupied, 0..49 free, < 0
-    unknown."""
-    d = np.asarray(grid.data)
-    img = np.full(d.shape, FREE, dtype=np.uint8)
-    img[d >= 50] = OCCUPIED
-    img[d < 0] = UNKNOWN
-    img = np.ascontiguousarray(img[::-1])
-    head = "P5\n" + "".join(f"# {ln}\n" for ln in comment.splitlines())
-    head += f"{img.shape[1]} {img.shape[0]}\n255\n"
-    return head.encode("ascii") + img.tobytes()
-
-
-def write_map(grid: OccupancyGrid, yaml_path: str | Path, *, comment: str = "",
-              reflectors: Sequence[Reflector] = ()) -> tuple[Path, Path]:
-    """Write ``grid`` as ``yaml_path`` plus a PGM of the same stem next to it (trinary,
-    negate 0, map_server's default thresholds), with ``reflectors`` (positions in ``map``)
-    listed under the YAML's ``reflectors:`` key when there are any. Returns both paths."""
-    o = grid.origin
-    if abs(o.theta) > 1e-12:
-        raise ValueError("write_map: map_server maps with a rotated origin are not supported")
-    yaml_path = Path(yaml_path)
-    pgm_path = yaml_path.with_suffix(".pgm")
-    yaml_path.parent.mkdir(parents=True, exist_ok=True)
-    pgm_path.write_bytes(pgm_bytes(grid, comment))
-    lines = [f"# {ln}" for ln in comment.splitlines()] + [
-        f"image: {pgm_path.name}",
-        f"resolution: {grid.resolution:g}           # m per pixel",
-        f"origin: [{o.x:g}, {o.y:g}, 0.0]     # lower-left pixel corner in map [m, m, rad]",
-        "negate: 0",
-        "occupied_thresh: 0.65",
-        "free_thresh: 0.196",
-        "mode: trinary",
-    ]
-    if reflectors:
-        lines.append("reflectors:             # laser-reflector posts (mmexec): centre [x, y] in map [m], radius [m]")
-        lines += [f"  - {{name: {_name(r.name)}, position: [{_num(r.position[0])}, {_num(r.position[1])}], "
-                  f"radius: {_num(r.radius)}}}" for r in reflectors]
-    yaml_path.write_text("\n".join(lines) + "\n")
-    return yaml_path, pgm_path
-
-
-def _name(name: str) -> str:
-    """``name`` as a YAML flow scalar: plain when that reads back as the same string,
-    else double-quoted (JSON's quoting is valid YAML)."""
-    plain = re.fullmatch(r"[A-Za-z_][A-Za-z0-9_.-]*", name) and name.lower() not in _YAML_WORDS
-    return name if plain else json.dumps(name)
-
-
-#: plain scalars YAML reads as booleans or null
-_YAML_WORDS = frozenset({"true", "false", "yes", "no", "on", "off", "y", "n", "null"})
-
-
-def _num(v: float) -> str:
-    r = round(float(v), 6)
-    return "0" if r == 0 else f"{r:.10g}"
-
-
 def scene_yaml(world: World | str | Path, indent: int = 4) -> str:
     """The world's static boxes as ``robot.scene`` lines, one flow mapping each:
     ``- {name, size [m], xyz [m] (box centre in map), rpy [rad]}`` (every box of a world
@@ -123,9 +57,9 @@ def scene_yaml(world: World | str | Path, indent: int = 4) -> str:
         if abs(T[2, 2] - 1.0) > 1e-9:
             raise ValueError(f"scene_yaml: {box.name} is not upright")
         yaw = math.atan2(T[1, 0], T[0, 0])
-        size = ", ".join(_num(s) for s in box.size)
-        xyz = ", ".join(_num(v) for v in T[:3, 3])
-        out.append(f"{pad}- {{name: {box.name}, size: [{size}], xyz: [{xyz}], rpy: [0, 0, {_num(yaw)}]}}")
+        size = ", ".join(yaml_number(s) for s in box.size)
+        xyz = ", ".join(yaml_number(v) for v in T[:3, 3])
+        out.append(f"{pad}- {{name: {box.name}, size: [{size}], xyz: [{xyz}], rpy: [0, 0, {yaml_number(yaw)}]}}")
     return "\n".join(out) + "\n"
 
 

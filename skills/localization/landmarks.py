@@ -1,7 +1,7 @@
 """The laser-reflector landmarks of a map, read from its map_server YAML.
 
 A map with reflectors lists them beside map_server's keys (map_server ignores the key;
-:func:`mmexec.skills.navigation.grid.load_map` validates it and returns the grid as
+:func:`mmexec.drivers.maps.load_map` validates it and returns the grid as
 before)::
 
     image: lab.pgm
@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from mmexec.config.yamlload import InputError, Mark, Problems, bind, load_yaml, mark_of
+from mmexec.drivers.maps import MapFile
 from mmexec.skills.localization.reflectors import ReflectorConfig
-from mmexec.skills.navigation.grid import MapFile
 
 __all__ = ["ReflectorMap", "load_reflectors"]
 

@@ -9,7 +9,7 @@ Plain Python over :class:`mmexec.drivers.interfaces.OccupancyGrid`; everything i
 from __future__ import annotations
 
 from mmexec.skills.navigation.astar import plan_path, simplify_path
-from mmexec.skills.navigation.grid import CostMap, cell_to_world, inflate, load_map, world_to_cell
+from mmexec.skills.navigation.grid import CostMap, cell_to_world, inflate, world_to_cell
 from mmexec.skills.navigation.standoff import StandoffResult, find_standoff, standoff_pose
 from mmexec.skills.navigation.tracker import PathTracker, TrackerConfig
 
@@ -21,7 +21,6 @@ __all__ = [
     "cell_to_world",
     "find_standoff",
     "inflate",
-    "load_map",
     "plan_path",
     "simplify_path",
     "standoff_pose",

@@ -1,4 +1,5 @@
-"""Occupancy-grid utilities: world <-> cell conversion, map_server map loading, inflation.
+"""Occupancy-grid utilities for navigation: world <-> cell conversion and inflation (map
+files are read and written by :mod:`mmexec.drivers.maps`).
 
 Conventions follow :class:`mmexec.drivers.interfaces.OccupancyGrid` (map_server): cell
 ``(row, col)`` covers ``[col*res, (col+1)*res) x [row*res, (row+1)*res)`` in the grid
@@ -11,23 +12,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Literal
 
 import cv2
 import numpy as np
 
-from mmexec.config.yamlload import InputError, Mark, Problems, bind, load_yaml, mark_of
-from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
+from mmexec.drivers.interfaces import OccupancyGrid
 
 __all__ = [
     "CostMap",
-    "MapFile",
-    "MapReflector",
     "cell_to_world",
     "inflate",
-    "load_map",
-    "read_pgm",
     "world_to_cell",
 ]
 
@@ -51,142 +45,6 @@ def cell_to_world(grid: OccupancyGrid, row: int, col: int) -> tuple[float, float
     gx, gy = (col + 0.5) * grid.resolution, (row + 0.5) * grid.resolution
     c, s = math.cos(o.theta), math.sin(o.theta)
     return o.x + c * gx - s * gy, o.y + s * gx + c * gy
-
-
-# --------------------------------------------------------------------------- map files
-
-
-@dataclass(frozen=True)
-class MapReflector:
-    """A laser-reflector post of the map (an mmexec key of the map YAML, which map_server
-    ignores): ``name``, centre ``position`` ``[x, y]`` in ``map`` [m], post ``radius`` [m].
-    Read with :func:`mmexec.skills.localization.landmarks.load_reflectors`."""
-
-    name: str
-    position: tuple[float, float]
-    radius: float
-
-    def validate(self) -> list[str]:
-        return [] if self.radius > 0 else [f"reflector {self.name!r}: radius must be > 0 m, got {self.radius}"]
-
-
-@dataclass(frozen=True)
-class MapFile:
-    """A map_server map description (the YAML next to the PGM).
-
-    ``origin`` is ``[x, y, yaw]`` of the lower-left pixel's corner in ``map`` [m, m, rad];
-    ``resolution`` [m/pixel]; thresholds are occupancy probabilities in [0, 1];
-    ``reflectors``: the laser-reflector landmarks, if the map has any.
-    """
-
-    image: str
-    resolution: float
-    origin: tuple[float, float, float]
-    negate: int = 0
-    occupied_thresh: float = 0.65
-    free_thresh: float = 0.196
-    mode: Literal["trinary", "scale"] = "trinary"
-    reflectors: tuple[MapReflector, ...] = ()
-
-    def validate(self) -> list[str]:
-        errs = []
-        if not self.resolution > 0:
-            errs.append(f"resolution: must be > 0 m/pixel, got {self.resolution}")
-        if self.negate not in (0, 1):
-            errs.append(f"negate: expected 0 or 1, got {self.negate}")
-        if not 0.0 <= self.free_thresh < self.occupied_thresh <= 1.0:
-            errs.append(
-                f"thresholds: need 0 <= free_thresh < occupied_thresh <= 1, got "
-                f"{self.free_thresh} and {self.occupied_thresh}"
-            )
-        return errs
-
-
-def read_pgm(path: str | Path) -> np.ndarray:
-    """Read a binary (P5) or ASCII (P2) 8-bit PGM file into an HxW uint8 array (row 0 at
-    the top of the picture). Raises :class:`InputError` naming the file on bad content."""
-    name = str(path)
-    try:
-        data = Path(path).read_bytes()
-    except OSError as e:
-        raise InputError.at(Mark(name, 1, 1), f"cannot read map image: {e.strerror or e}") from None
-    tokens: list[bytes] = []
-    pos = 0
-    while len(tokens) < 4:
-        while pos < len(data) and data[pos : pos + 1].isspace():
-            pos += 1
-        if pos < len(data) and data[pos : pos + 1] == b"#":
-            while pos < len(data) and data[pos : pos + 1] not in (b"\n", b"\r"):
-                pos += 1
-            continue
-        start = pos
-        while pos < len(data) and not data[pos : pos + 1].isspace() and data[pos : pos + 1] != b"#":
-            pos += 1
-        if start == pos:
-            raise InputError.at(Mark(name, 1, 1), "truncated PGM header (expected magic, width, height, maxval)")
-        tokens.append(data[start:pos])
-    magic = tokens[0]
-    if magic not in (b"P5", b"P2"):
-        raise InputError.at(Mark(name, 1, 1), f"not a PGM image (magic {magic[:8]!r}, expected P5 or P2)")
-    try:
-        w, h, maxval = (int(t) for t in tokens[1:4])
-    except ValueError:
-        raise InputError.at(Mark(name, 1, 1), "bad PGM header: width, height and maxval must be integers") from None
-    if w <= 0 or h <= 0 or not 0 < maxval < 256:
-        raise InputError.at(Mark(name, 1, 1), f"unsupported PGM: {w}x{h}, maxval {maxval} (need 8-bit)")
-    if magic == b"P5":
-        body = data[pos + 1 : pos + 1 + w * h]
-        if len(body) != w * h:
-            raise InputError.at(Mark(name, 1, 1), f"PGM data truncated: {len(body)} of {w * h} bytes")
-        img = np.frombuffer(body, dtype=np.uint8).reshape(h, w)
-    else:
-        try:
-            vals = [int(t) for t in data[pos:].split()]
-        except ValueError:
-            raise InputError.at(Mark(name, 1, 1), "bad ASCII PGM pixel value") from None
-        if len(vals) < w * h:
-            raise InputError.at(Mark(name, 1, 1), f"PGM data truncated: {len(vals)} of {w * h} values")
-        img = np.asarray(vals[: w * h], dtype=np.int64).clip(0, 255).astype(np.uint8).reshape(h, w)
-    if maxval != 255:
-        img = (img.astype(np.float64) * (255.0 / maxval)).round().clip(0, 255).astype(np.uint8)
-    return img
-
-
-def load_map(yaml_path: str | Path) -> OccupancyGrid:
-    """Load a map_server-style map (YAML + PGM) as an :class:`OccupancyGrid` in ``map``.
-
-    Errors (missing keys, wrong types, unreadable image) raise :class:`InputError` with
-    ``FILE:LINE:COL: message``. The image is flipped so that grid row 0 is the bottom
-    row of the picture (map_server convention).
-    """
-    raw = load_yaml(yaml_path)
-    name = str(yaml_path)
-    problems = Problems()
-    mf = bind(MapFile, raw, mark_of(raw, Mark(name, 1, 1)), "", problems)
-    problems.raise_if_any()
-    assert isinstance(mf, MapFile)
-    img_path = Path(mf.image)
-    if not img_path.is_absolute():
-        img_path = Path(yaml_path).parent / img_path
-    if not img_path.exists():
-        vm = raw.value_mark("image") if hasattr(raw, "value_mark") else Mark(name, 1, 1)
-        raise InputError.at(vm, f"image: no such file {str(img_path)!r}")
-    img = read_pgm(img_path)
-    pix = img.astype(np.float64)
-    p = pix / 255.0 if mf.negate else (255.0 - pix) / 255.0
-    data = np.full(img.shape, -1, dtype=np.int8)
-    if mf.mode == "trinary":
-        data[p > mf.occupied_thresh] = 100
-        data[p < mf.free_thresh] = 0
-    else:
-        data[p > mf.occupied_thresh] = 100
-        data[p < mf.free_thresh] = 0
-        mid = (p >= mf.free_thresh) & (p <= mf.occupied_thresh)
-        scaled = 99.0 * (p - mf.free_thresh) / (mf.occupied_thresh - mf.free_thresh)
-        data[mid] = np.round(scaled[mid]).astype(np.int8)
-    data = np.ascontiguousarray(data[::-1])
-    ox, oy, oyaw = mf.origin
-    return OccupancyGrid(data=data, resolution=mf.resolution, origin=Pose2D(ox, oy, oyaw))
 
 
 # --------------------------------------------------------------------------- inflation

@@ -88,7 +88,7 @@ def _room_map(folder: Path) -> Path:
     import numpy as np
 
     from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
-    from mmexec.sim.mapgen import write_map
+    from mmexec.drivers.maps import write_map
 
     data = np.zeros((40, 80), dtype=np.int8)
     data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100

@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from mmexec.config.yamlload import load_yaml_text
+from mmexec.drivers import maps
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
+from mmexec.drivers.maps import load_map, read_pgm
 from mmexec.drivers.robot import pose_matrix
 from mmexec.sim import mapgen
 from mmexec.sim.world import load_world
-from mmexec.skills.navigation.grid import load_map, read_pgm
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -39,7 +40,7 @@ def test_the_map_round_trips_through_load_map(tmp_path: Path, bench_world: str, 
     grid = mapgen.world_map(w)
     sim = w.occupancy(0.05)  # what the sim backend puts on Robot.occupancy
     assert np.array_equal(grid.data, sim.data)
-    yaml_path, pgm_path = mapgen.write_map(grid, tmp_path / "maps" / f"{world}.yaml", comment="test\nmap")
+    yaml_path, pgm_path = maps.write_map(grid, tmp_path / "maps" / f"{world}.yaml", comment="test\nmap")
     assert pgm_path == tmp_path / "maps" / f"{world}.pgm" and pgm_path.exists()
     back = load_map(yaml_path)
     assert back.resolution == pytest.approx(0.05)
@@ -53,15 +54,15 @@ def test_unknown_cells_and_the_picture_layout(tmp_path: Path) -> None:
     data[0, 0] = 100   # bottom-left of the map: last picture row
     data[2, 3] = -1    # top-right: first picture row, grey
     grid = OccupancyGrid(data=data, resolution=0.1, origin=Pose2D(1.0, -2.0, 0.0))
-    yaml_path, pgm_path = mapgen.write_map(grid, tmp_path / "m.yaml")
+    yaml_path, pgm_path = maps.write_map(grid, tmp_path / "m.yaml")
     img = read_pgm(pgm_path)
     assert img.shape == (3, 4)
-    assert img[2, 0] == mapgen.OCCUPIED and img[0, 3] == mapgen.UNKNOWN and img[1, 1] == mapgen.FREE
+    assert img[2, 0] == maps.OCCUPIED and img[0, 3] == maps.UNKNOWN and img[1, 1] == maps.FREE
     back = load_map(yaml_path)
     assert np.array_equal(back.data, data)
     assert (back.origin.x, back.origin.y) == pytest.approx((1.0, -2.0))
     with pytest.raises(ValueError, match="rotated origin"):
-        mapgen.write_map(OccupancyGrid(data=data, resolution=0.1, origin=Pose2D(0, 0, 0.5)), tmp_path / "r.yaml")
+        maps.write_map(OccupancyGrid(data=data, resolution=0.1, origin=Pose2D(0, 0, 0.5)), tmp_path / "r.yaml")
 
 
 def test_scene_lines_rebuild_the_worlds_scene_boxes() -> None:

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from mmexec.config.yamlload import InputError
+from mmexec.drivers.maps import load_map
 from mmexec.skills.localization import ReflectorConfig, load_reflectors
-from mmexec.skills.navigation.grid import load_map
 
 HEAD = "image: m.pgm\nresolution: 0.05\norigin: [-0.1, -0.1, 0.0]\n"
 

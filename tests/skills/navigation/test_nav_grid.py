@@ -7,7 +7,8 @@ import pytest
 
 from mmexec.config.yamlload import InputError
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
-from mmexec.skills.navigation.grid import cell_to_world, inflate, load_map, world_to_cell
+from mmexec.drivers.maps import load_map
+from mmexec.skills.navigation.grid import cell_to_world, inflate, world_to_cell
 
 _ORIGIN = Pose2D(-1.0, 2.0, 0.0)
 
