@@ -664,7 +664,7 @@ def _load_map(section: YDict, problems: Problems) -> OccupancyGrid | None:
     if not path.is_absolute():
         path = Path(where.file).parent / path
     try:
-        from mmexec.skills.navigation.grid import load_map
+        from mmexec.drivers.maps import load_map
     except ImportError as e:
         problems.add(where, f"robot.map.yaml: the map loader is not available ({e})")
         return None
