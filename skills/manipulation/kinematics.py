@@ -1,8 +1,14 @@
-"""Forward and inverse kinematics of the two arms, in product-of-exponentials form.
+"""Forward and inverse kinematics of an arm, in product-of-exponentials form.
 
 Frames: every pose is in the arm's mount frame (``arm_base`` in
 :mod:`mmexec.drivers.interfaces`: ``arm_base_link`` on the LoCoBot, ROS ``base_link`` of
 the UR, x forward, z up), as a 4x4 ``T_armbase_tool``. Units: m, rad.
+
+The arm comes from the robot's description (:attr:`RobotDescription.arm
+<mmexec.drivers.descriptions.RobotDescription.arm>`: screws, tool pose, limits, approach
+axis and grasp point, see :mod:`mmexec.drivers.descriptions.chain`):
+:meth:`ArmKinematics.from_description`. :func:`wx250s` and :func:`ur5e` build the two
+arms the descriptions hold today directly (for tests and benchmarks):
 
 * WX250s (LoCoBot variant): the Interbotix PoE parameters (docs/robots.md 1.3) with every
   height lowered by 0.005825 m; tool frame ``ee_gripper_link`` (between the finger pads,
@@ -26,9 +32,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mmexec.drivers.dynamixel import model as wx250s_model
+from mmexec.drivers.descriptions import ArmChain, RobotDescription, ur5e_robotiq
+from mmexec.drivers.descriptions import ur as ur_arm
+from mmexec.drivers.descriptions import wx250s as wx250s_arm
+from mmexec.drivers.descriptions.chain import dh_to_poe, dh_transform
 from mmexec.drivers.interfaces import JointLimit
-from mmexec.drivers.ur import model as urmodel
 
 __all__ = [
     "ArmKinematics",
@@ -85,39 +93,39 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def _dh(theta: float, d: float, a: float, alpha: float) -> np.ndarray:
-    ct, st, ca, sa = math.cos(theta), math.sin(theta), math.cos(alpha), math.sin(alpha)
-    return np.array([[ct, -st * ca, st * sa, a * ct], [st, ct * ca, -ct * sa, a * st], [0, sa, ca, d], [0, 0, 0, 1.0]])
-
-
-def dh_to_poe(dh: Sequence[tuple[float, float, float]]) -> tuple[np.ndarray, np.ndarray]:
-    """Standard DH rows ``(d, a, alpha)`` of revolute joints -> (6xn space screws, M)."""
-    T = np.eye(4)
-    screws = []
-    for d, a, alpha in dh:
-        w = T[:3, 2].copy()
-        p = T[:3, 3].copy()
-        screws.append(np.concatenate([w, -np.cross(w, p)]))
-        T = T @ _dh(0.0, d, a, alpha)
-    return np.array(screws).T, T
+#: one standard DH row as a 4x4 transform (kept under its old name for callers)
+_dh = dh_transform
 
 
 @dataclass(frozen=True)
 class ArmKinematics:
-    """A serial arm in PoE form: ``screws`` 6xn space screw axes (omega; v) at zero pose,
-    ``M`` the tool pose at zero, ``limits`` per joint, ``approach_axis`` the tool axis
-    (0 = x, 2 = z) that points out of the gripper."""
+    """A serial arm in PoE form, for FK and IK: the description's ``chain`` (joint names,
+    6xn space screw axes (omega; v) at the zero pose, approach axis: the tool axis, 0 = x,
+    2 = z, that points out of the gripper), ``M`` the tool pose at zero (the chain's, with
+    the grasp point offset applied), ``limits`` per joint (the chain's, with the
+    acceleration for trajectory timing) and a ``name``. Build with :meth:`from_chain` or
+    :meth:`from_description`."""
 
-    name: str
-    joint_names: tuple[str, ...]
-    screws: np.ndarray
+    chain: ArmChain
     M: np.ndarray
     limits: tuple[JointLimit, ...]
-    approach_axis: int
+    name: str
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.chain.joint_names
+
+    @property
+    def screws(self) -> np.ndarray:
+        return self.chain.screws
+
+    @property
+    def approach_axis(self) -> int:
+        return self.chain.approach_axis
 
     @property
     def dof(self) -> int:
-        return len(self.joint_names)
+        return len(self.chain.joint_names)
 
     @property
     def lower(self) -> np.ndarray:
@@ -129,8 +137,33 @@ class ArmKinematics:
 
     def with_tool_offset(self, T_tool_tcp: np.ndarray, name: str | None = None) -> ArmKinematics:
         """The same arm with its tool frame moved by ``T_tool_tcp`` (4x4)."""
-        return ArmKinematics(name or self.name, self.joint_names, self.screws, self.M @ T_tool_tcp,
-                             self.limits, self.approach_axis)
+        return ArmKinematics(self.chain, self.M @ T_tool_tcp, self.limits, name or self.name)
+
+    @classmethod
+    def from_chain(cls, chain: ArmChain, *, tcp_offset: float | None = None,
+                   acceleration: float | None = None) -> ArmKinematics:
+        """The arm of ``chain`` with its tool frame moved ``tcp_offset`` [m] along the
+        approach axis (None: the chain's own grasp point offset; 0: the tool link
+        itself) and every joint's acceleration limit set to ``acceleration`` [rad/s^2]
+        (None: the chain's default)."""
+        offset = chain.tcp_offset if tcp_offset is None else tcp_offset
+        acc = chain.acceleration if acceleration is None else acceleration
+        limits = tuple(dataclasses.replace(lim, acceleration=acc) for lim in chain.limits)
+        M = chain.M
+        if offset != 0.0:
+            tcp = np.eye(4)
+            tcp[chain.approach_axis, 3] = offset
+            M = M @ tcp
+        return cls(chain, M, limits, chain.name)
+
+    @classmethod
+    def from_description(cls, description: RobotDescription, *, tcp_offset: float | None = None,
+                         acceleration: float | None = None) -> ArmKinematics:
+        """The arm of a robot description (see :meth:`from_chain`); ValueError when the
+        robot has no arm."""
+        if description.arm is None:
+            raise ValueError(f"robot {description.name} has no arm")
+        return cls.from_chain(description.arm, tcp_offset=tcp_offset, acceleration=acceleration)
 
     # ------------------------------------------------------------------ FK / Jacobian
     def _pre(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
@@ -285,46 +318,22 @@ class ArmKinematics:
 
 # --------------------------------------------------------------------------- the arms
 
-_PI_LIM = math.pi - 1e-5
-
 
 def wx250s(*, locobot: bool = True, acceleration: float = 5.0) -> ArmKinematics:
     """The WidowX-250 6DOF (``locobot=True``: LoCoBot mount, heights -0.005825 m); tool
     frame ``ee_gripper_link``. ``acceleration`` [rad/s^2] per joint for trajectory timing
-    (not published by Interbotix; a conservative default)."""
-    dz = 0.005825 if locobot else 0.0
-    h1, h2 = 0.11065 - dz, 0.36065 - dz
-    screws = np.array([
-        [0, 0, 1, 0, 0, 0],
-        [0, 1, 0, -h1, 0, 0],
-        [0, 1, 0, -h2, 0, 0.04975],
-        [1, 0, 0, 0, h2, 0],
-        [0, 1, 0, -h2, 0, 0.29975],
-        [1, 0, 0, 0, h2, 0],
-    ], dtype=float).T
-    M = np.eye(4)
-    M[:3, 3] = (0.458325, 0.0, h2)
-    # joint ranges, speeds and efforts: the driver's model (one source of truth)
-    limits = tuple(dataclasses.replace(j.limit(), acceleration=acceleration) for j in wx250s_model.ARM_JOINTS)
-    return ArmKinematics("wx250s" + ("_locobot" if locobot else ""), tuple(lim.name for lim in limits),
-                         screws, M, limits, approach_axis=0)
+    (not published by Interbotix; a conservative default). Joint ranges, speeds and
+    efforts: the arm's joint table (:mod:`mmexec.drivers.descriptions.wx250s`), which the
+    driver uses too."""
+    return ArmKinematics.from_chain(wx250s_arm.arm_chain(locobot=locobot, acceleration=acceleration))
 
 
-#: UR5e standard DH rows ``(d, a, alpha)`` [m, m, rad]: the driver's table (docs/robots.md 2.1).
-UR5E_DH: tuple[tuple[float, float, float], ...] = urmodel.DH["ur5e"]
+#: UR5e standard DH rows ``(d, a, alpha)`` [m, m, rad]: the UR arm facts (docs/robots.md 2.1).
+UR5E_DH: tuple[tuple[float, float, float], ...] = ur_arm.DH["ur5e"]
 
 
-def ur5e(*, tcp_offset: float = 0.155, acceleration: float = 3.0) -> ArmKinematics:
+def ur5e(*, tcp_offset: float = ur5e_robotiq.TCP_OFFSET, acceleration: float = 3.0) -> ArmKinematics:
     """The UR5e in ROS ``base_link``; tool = ``tool0`` moved ``tcp_offset`` [m] along its z
     (0 gives ``tool0`` itself). Joint limits from the ROS description (elbow +-pi, others
     +-2pi), 180 deg/s; ``acceleration`` [rad/s^2] is not published by UR (a default)."""
-    S, M = dh_to_poe(UR5E_DH)
-    T_bl_base = urmodel.T_BASELINK_BASE  # base_link = controller base rotated by pi about z
-    Rz = T_bl_base[:3, :3]
-    S = np.vstack([Rz @ S[:3], Rz @ S[3:]])
-    M = T_bl_base @ M
-    tcp = np.eye(4)
-    tcp[2, 3] = tcp_offset
-    names = urmodel.JOINT_NAMES
-    limits = urmodel.joint_limits("ur5e", acceleration)
-    return ArmKinematics("ur5e", names, S, M @ tcp, limits, approach_axis=2)
+    return ArmKinematics.from_chain(ur_arm.arm_chain("ur5e", tcp_offset=tcp_offset, acceleration=acceleration))

@@ -25,11 +25,12 @@ import logging
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from types import ModuleType
 from typing import Self
 
 import numpy as np
-import pybullet as p
 
+from mmexec.drivers.descriptions import RobotDescription, get
 from mmexec.drivers.geometry import matrix_to_quat, quat_to_matrix
 from mmexec.drivers.interfaces import SceneBox
 
@@ -53,27 +54,27 @@ class ArmModel:
     grasp_links: tuple[str, ...] = ()
 
     @classmethod
-    def from_sim_model(cls, name: str, gripper_width: float | None = None) -> ArmModel:
-        """The model ``name`` from :mod:`mmexec.sim.models` (URDF used as data), with the
-        gripper held open at ``gripper_width`` [m] (default: fully open)."""
-        from mmexec.sim.models import MODEL_INFO, urdf_path
-
-        info = MODEL_INFO[name]
+    def from_description(cls, description: RobotDescription, gripper_width: float | None = None) -> ArmModel:
+        """The arm of robot ``description`` (its generated URDF used as data, the links
+        its description allows to touch a held item), with the gripper held open at
+        ``gripper_width`` [m] (default: fully open)."""
+        info = description.info
         width = info.gripper_width_range[1] if gripper_width is None else gripper_width
-        grasp = tuple(info.finger_links) + ((info.tool_link,) if info.tool_link else ())
-        if name.startswith("locobot"):
-            grasp += ("gripper_link", "ee_arm_link", "gripper_bar_link", "fingers_link", "ee_gripper_link")
-        else:
-            grasp += ("robotiq_base_link", "robotiq_tcp", "flange", "tool0")
         return cls(
-            urdf=str(urdf_path(name)),
+            urdf=str(description.urdf_path),
             arm_joints=tuple(info.arm_joints),
             arm_base_link=info.arm_base_link,
             tool_link=info.tool_link,
             gripper_joints=tuple(info.gripper_joints),
             gripper_positions=tuple(info.width_to_q(width)),
-            grasp_links=grasp,
+            grasp_links=description.grasp_links,
         )
+
+    @classmethod
+    def from_sim_model(cls, name: str, gripper_width: float | None = None) -> ArmModel:
+        """:meth:`from_description` of the registered description ``name``
+        (:func:`mmexec.drivers.descriptions.get`: KeyError listing the known ones)."""
+        return cls.from_description(get(name), gripper_width)
 
 
 @dataclass
@@ -104,9 +105,14 @@ def pb_to_pose(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
 
 class PlanningScene:
     """Collision world for one arm (see the module doc). Connects lazily on first use;
-    call :meth:`close` (or use it as a context manager) to free the pybullet client."""
+    call :meth:`close` (or use it as a context manager) to free the pybullet client.
+    pybullet is imported here, when a scene is built, so skill modules load without the
+    simulator's engine."""
 
     def __init__(self, model: ArmModel, *, contact_tolerance: float = 0.0, acm_samples: int = 200, seed: int = 0) -> None:
+        import pybullet
+
+        self._pb: ModuleType = pybullet
         self.model = model
         self.contact_tolerance = contact_tolerance
         self._acm_samples = acm_samples
@@ -136,14 +142,14 @@ class PlanningScene:
         """Disconnect the pybullet client (idempotent)."""
         if self._cid is not None:
             try:
-                p.disconnect(physicsClientId=self._cid)
+                self._pb.disconnect(physicsClientId=self._cid)
             finally:
                 self._cid = None
 
     def _ensure(self) -> int:
         if self._cid is not None:
             return self._cid
-        cid = p.connect(p.DIRECT)
+        cid = self._pb.connect(self._pb.DIRECT)
         self._cid = cid
         # No contactBreakingThreshold here: Bullet keeps it in a process-wide global
         # (gContactBreakingThreshold), so setting it on this client changed contact
@@ -159,20 +165,20 @@ class PlanningScene:
     def _load_robot(self) -> None:
         cid = self._cid
         m = self.model
-        flags = p.URDF_USE_SELF_COLLISION | p.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
+        flags = self._pb.URDF_USE_SELF_COLLISION | self._pb.URDF_USE_SELF_COLLISION_EXCLUDE_PARENT
         try:
-            robot = p.loadURDF(m.urdf, useFixedBase=True, flags=flags, physicsClientId=cid)
-        except p.error as e:
+            robot = self._pb.loadURDF(m.urdf, useFixedBase=True, flags=flags, physicsClientId=cid)
+        except self._pb.error as e:
             raise ValueError(f"planning scene: cannot load URDF {m.urdf!r}: {e}") from e
         self._robot = robot
         self._body_name[robot] = "robot"
         joints: dict[str, int] = {}
-        for i in range(p.getNumJoints(robot, physicsClientId=cid)):
-            info = p.getJointInfo(robot, i, physicsClientId=cid)
+        for i in range(self._pb.getNumJoints(robot, physicsClientId=cid)):
+            info = self._pb.getJointInfo(robot, i, physicsClientId=cid)
             joints[info[1].decode()] = i
             self._link_idx[info[12].decode()] = i
             self._link_name[i] = info[12].decode()
-        self._link_name[-1] = p.getBodyInfo(robot, physicsClientId=cid)[0].decode()
+        self._link_name[-1] = self._pb.getBodyInfo(robot, physicsClientId=cid)[0].decode()
         self._link_idx.setdefault(self._link_name[-1], -1)
         missing = [j for j in m.arm_joints + m.gripper_joints if j not in joints]
         if missing:
@@ -183,28 +189,28 @@ class PlanningScene:
         self._joint_idx = [joints[j] for j in m.arm_joints]
         self.limits = []
         for j in self._joint_idx:
-            info = p.getJointInfo(robot, j, physicsClientId=cid)
+            info = self._pb.getJointInfo(robot, j, physicsClientId=cid)
             lo, hi = float(info[8]), float(info[9])
             if lo > hi:  # continuous joint
                 lo, hi = -2 * math.pi, 2 * math.pi
             self.limits.append((lo, hi))
         self._tool_idx = self._link_idx[m.tool_link]
         for j, v in zip(m.gripper_joints, m.gripper_positions):
-            p.resetJointState(robot, joints[j], v, physicsClientId=cid)
+            self._pb.resetJointState(robot, joints[j], v, physicsClientId=cid)
         # put arm_base_link at the world origin
         ab = self._link_idx[m.arm_base_link]
         if ab >= 0:
-            st = p.getLinkState(robot, ab, computeForwardKinematics=1, physicsClientId=cid)
-            T_root_ab = np.linalg.inv(pb_to_pose(*p.getBasePositionAndOrientation(robot, physicsClientId=cid))) @ pb_to_pose(st[4], st[5])
+            st = self._pb.getLinkState(robot, ab, computeForwardKinematics=1, physicsClientId=cid)
+            T_root_ab = np.linalg.inv(pb_to_pose(*self._pb.getBasePositionAndOrientation(robot, physicsClientId=cid))) @ pb_to_pose(st[4], st[5])
             pos, orn = pose_to_pb(np.linalg.inv(T_root_ab))
-            p.resetBasePositionAndOrientation(robot, pos, orn, physicsClientId=cid)
+            self._pb.resetBasePositionAndOrientation(robot, pos, orn, physicsClientId=cid)
         self._build_acm()
 
     def _robot_contacts(self) -> set[tuple[int, int]]:
         cid = self._cid
-        p.performCollisionDetection(physicsClientId=cid)
+        self._pb.performCollisionDetection(physicsClientId=cid)
         out = set()
-        for c in p.getContactPoints(bodyA=self._robot, bodyB=self._robot, physicsClientId=cid):
+        for c in self._pb.getContactPoints(bodyA=self._robot, bodyB=self._robot, physicsClientId=cid):
             if c[8] < -self.contact_tolerance:
                 a, b = sorted((c[3], c[4]))
                 out.add((a, b))
@@ -236,14 +242,14 @@ class PlanningScene:
             for b in fixed[i + 1 :]:
                 pairs.add((a, b))
         for a, b in pairs:
-            p.setCollisionFilterPair(r, r, a, b, 0, physicsClientId=self._cid)
+            self._pb.setCollisionFilterPair(r, r, a, b, 0, physicsClientId=self._cid)
             self._allowed.add((r, a, r, b))
             self._allowed.add((r, b, r, a))
         log.debug("planning scene: %d allowed self-collision pairs", len(default | always))
 
     def _moving_links(self) -> set[int]:
         cid = self._cid
-        parent = {i: p.getJointInfo(self._robot, i, physicsClientId=cid)[16] for i in self._link_name if i >= 0}
+        parent = {i: self._pb.getJointInfo(self._robot, i, physicsClientId=cid)[16] for i in self._link_name if i >= 0}
         moving: set[int] = set()
         for i in parent:
             k = i
@@ -256,7 +262,7 @@ class PlanningScene:
 
     # ------------------------------------------------------------------ state
     def _set_q(self, q: Sequence[float]) -> None:
-        p.resetJointStatesMultiDof(
+        self._pb.resetJointStatesMultiDof(
             self._robot, self._joint_idx, [[float(x)] for x in q], physicsClientId=self._cid
         )
 
@@ -264,7 +270,7 @@ class PlanningScene:
         """``T_armbase_tool`` of the model at ``q`` (pybullet's forward kinematics)."""
         self._ensure()
         self._set_q(q)
-        st = p.getLinkState(self._robot, self._tool_idx, computeForwardKinematics=1, physicsClientId=self._cid)
+        st = self._pb.getLinkState(self._robot, self._tool_idx, computeForwardKinematics=1, physicsClientId=self._cid)
         return pb_to_pose(st[4], st[5])
 
     # ------------------------------------------------------------------ static world
@@ -273,22 +279,22 @@ class PlanningScene:
         the arm base frame with ``T_armbase_map`` (identity: boxes already in arm base)."""
         cid = self._ensure()
         for b in list(self._static):
-            p.removeBody(b, physicsClientId=cid)
+            self._pb.removeBody(b, physicsClientId=cid)
             self._body_name.pop(b, None)
         self._static.clear()
         T_am = np.eye(4) if T_armbase_map is None else np.asarray(T_armbase_map, dtype=float)
         for box in boxes:
             if min(box.size) <= 0:
                 raise ValueError(f"scene box {box.name!r}: sizes must be > 0 m, got {box.size}")
-            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[s / 2 for s in box.size], physicsClientId=cid)
+            shape = self._pb.createCollisionShape(self._pb.GEOM_BOX, halfExtents=[s / 2 for s in box.size], physicsClientId=cid)
             pos, orn = pose_to_pb(T_am @ np.asarray(box.pose, dtype=float))
-            body = p.createMultiBody(0.0, shape, -1, pos, orn, physicsClientId=cid)
+            body = self._pb.createMultiBody(0.0, shape, -1, pos, orn, physicsClientId=cid)
             self._static[body] = box.name
             self._body_name[body] = box.name
         ids = list(self._static)
         for i, a in enumerate(ids):  # static boxes never need checking against each other
             for b in ids[i + 1 :]:
-                p.setCollisionFilterPair(a, b, -1, -1, 0, physicsClientId=cid)
+                self._pb.setCollisionFilterPair(a, b, -1, -1, 0, physicsClientId=cid)
 
     @property
     def static_boxes(self) -> list[str]:
@@ -306,11 +312,11 @@ class PlanningScene:
             raise ValueError(f"scene item {name!r} already exists")
         if min(size) <= 0:
             raise ValueError(f"scene item {name!r}: sizes must be > 0 m, got {size}")
-        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[s / 2 for s in size], physicsClientId=cid)
+        shape = self._pb.createCollisionShape(self._pb.GEOM_BOX, halfExtents=[s / 2 for s in size], physicsClientId=cid)
         pos, orn = pose_to_pb(np.asarray(T_armbase_item, dtype=float))
-        body = p.createMultiBody(0.0, shape, -1, pos, orn, physicsClientId=cid)
+        body = self._pb.createMultiBody(0.0, shape, -1, pos, orn, physicsClientId=cid)
         for s in self._static:
-            p.setCollisionFilterPair(body, s, -1, -1, 0, physicsClientId=cid)
+            self._pb.setCollisionFilterPair(body, s, -1, -1, 0, physicsClientId=cid)
         self._items[name] = SceneItem(name, body, tuple(float(s) for s in size), np.asarray(T_armbase_item, dtype=float).copy())
         self._body_name[body] = name
 
@@ -333,7 +339,7 @@ class PlanningScene:
         it.attached = True
         self._set_grasp_filter(it, enable=False)
         for s in self._static:
-            p.setCollisionFilterPair(it.body, s, -1, -1, 1, physicsClientId=cid)
+            self._pb.setCollisionFilterPair(it.body, s, -1, -1, 1, physicsClientId=cid)
 
     def clear_attached_from_static(self, name: str, q: Sequence[float], max_shift: float = 0.02) -> float:
         """Move attached item ``name``'s model out of the static boxes it penetrates at
@@ -351,11 +357,11 @@ class PlanningScene:
         total = np.zeros(3)
         for _ in range(6):
             pos, orn = pose_to_pb(T_tool @ it.T)
-            p.resetBasePositionAndOrientation(it.body, pos, orn, physicsClientId=cid)
-            p.performCollisionDetection(physicsClientId=cid)
+            self._pb.resetBasePositionAndOrientation(it.body, pos, orn, physicsClientId=cid)
+            self._pb.performCollisionDetection(physicsClientId=cid)
             deepest = None
             for s in self._static:
-                for c in p.getContactPoints(bodyA=it.body, bodyB=s, physicsClientId=cid):
+                for c in self._pb.getContactPoints(bodyA=it.body, bodyB=s, physicsClientId=cid):
                     if c[8] < -self.contact_tolerance and (deepest is None or c[8] < deepest[8]):
                         deepest = c
             if deepest is None:
@@ -381,9 +387,9 @@ class PlanningScene:
         it.attached = False
         it.released = True
         pos, orn = pose_to_pb(it.T)
-        p.resetBasePositionAndOrientation(it.body, pos, orn, physicsClientId=cid)
+        self._pb.resetBasePositionAndOrientation(it.body, pos, orn, physicsClientId=cid)
         for s in self._static:
-            p.setCollisionFilterPair(it.body, s, -1, -1, 0, physicsClientId=cid)
+            self._pb.setCollisionFilterPair(it.body, s, -1, -1, 0, physicsClientId=cid)
 
     def remove_item(self, name: str) -> None:
         """Remove item ``name`` from the scene."""
@@ -391,14 +397,14 @@ class PlanningScene:
         it = self._items.pop(name, None)
         if it is None:
             raise KeyError(f"no scene item {name!r}")
-        p.removeBody(it.body, physicsClientId=cid)
+        self._pb.removeBody(it.body, physicsClientId=cid)
         self._body_name.pop(it.body, None)
 
     def _set_grasp_filter(self, it: SceneItem, enable: bool) -> None:
         for ln in self.model.grasp_links:
             li = self._link_idx.get(ln)
             if li is not None:
-                p.setCollisionFilterPair(it.body, self._robot, -1, li, int(enable), physicsClientId=self._cid)
+                self._pb.setCollisionFilterPair(it.body, self._robot, -1, li, int(enable), physicsClientId=self._cid)
 
     # ------------------------------------------------------------------ checks
     def _contacts(self, q: Sequence[float]) -> list[tuple[int, int, int, int, float]]:
@@ -406,16 +412,16 @@ class PlanningScene:
         self._set_q(q)
         attached = [it for it in self._items.values() if it.attached]
         if attached:
-            st = p.getLinkState(self._robot, self._tool_idx, computeForwardKinematics=1, physicsClientId=cid)
+            st = self._pb.getLinkState(self._robot, self._tool_idx, computeForwardKinematics=1, physicsClientId=cid)
             T_tool = pb_to_pose(st[4], st[5])
             for it in attached:
                 pos, orn = pose_to_pb(T_tool @ it.T)
-                p.resetBasePositionAndOrientation(it.body, pos, orn, physicsClientId=cid)
-        p.performCollisionDetection(physicsClientId=cid)
+                self._pb.resetBasePositionAndOrientation(it.body, pos, orn, physicsClientId=cid)
+        self._pb.performCollisionDetection(physicsClientId=cid)
         out = []
         tol = -self.contact_tolerance
         allowed = self._allowed
-        for c in p.getContactPoints(physicsClientId=cid):
+        for c in self._pb.getContactPoints(physicsClientId=cid):
             if c[8] < tol and (c[1], c[3], c[2], c[4]) not in allowed:
                 out.append((c[1], c[3], c[2], c[4], c[8]))
         return out
