@@ -25,11 +25,14 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 
 from mmexec.drivers.geometry import planar_transform
+
+if TYPE_CHECKING:  # the descriptions use JointLimit from here: no import at run time
+    from mmexec.drivers.descriptions import RobotDescription
 
 __all__ = [
     "BLIND_FAULTS",
@@ -610,9 +613,14 @@ class Robot(abc.ABC):
     Absent capabilities are None (a fixed arm has no ``base``).
     ``profile`` is the robot profile from the config (named poses, mounts, skill
     defaults); its content is read by skills, not by the executive.
+    ``description`` is the robot model's description (:mod:`mmexec.drivers.descriptions`:
+    kinematics, limits, tool and grasp links, collision model), set by the backend from
+    its config; None when the config names none. Skills take model facts from it and
+    never decide by a model's name.
     """
 
     name: str = "robot"
+    description: RobotDescription | None = None
     clock: Clock
     base: Base | None = None
     arm: Arm | None = None

@@ -4,7 +4,8 @@ The executive's config factory calls :func:`build` with the config's ``sim:`` se
 (a :class:`~mmexec.config.yamlload.YDict`, or None for all defaults). Keys (all
 optional, unknown keys are errors; see docs/sim.md):
 
-``robot`` (locobot_wx250s | ur5e_robotiq), ``world`` (shipped name or path),
+``robot`` (a robot description's name: locobot_wx250s | ur5e_robotiq, see
+:mod:`mmexec.drivers.descriptions`), ``world`` (shipped name or path),
 ``physics_hz`` (240), ``camera`` (width, height, hfov, near, far, noise, pan, tilt,
 mount), ``lidar`` (beams, range_min, range_max, noise, noise_fraction, quality),
 ``odometry_noise`` (profile, linear, angular, scale, gyro_scale, gyro_bias, slip),
@@ -16,6 +17,7 @@ chase-camera video, finalised by :meth:`SimRobot.close`.
 
 from __future__ import annotations
 
+import enum
 import logging
 import math
 import os
@@ -29,6 +31,7 @@ import numpy as np
 import pybullet as p
 
 from mmexec.config.yamlload import Mark, Problems, YDict, bind, did_you_mean
+from mmexec.drivers import descriptions
 from mmexec.drivers.interfaces import (
     CameraIntrinsics,
     CapabilityError,
@@ -50,7 +53,6 @@ from mmexec.sim.capabilities import (
 )
 from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultConfig, FaultInjector, blocking_obstacles
-from mmexec.sim.models import MODEL_INFO, urdf_path
 from mmexec.sim.recording import Recorder
 from mmexec.sim.scene import (
     GROUP_ARM,
@@ -149,11 +151,16 @@ class OdometrySection:
         return self.model().validate()
 
 
+#: ``sim.robot``: the name of a registered robot description (a str), so a robot added to
+#: :data:`mmexec.drivers.descriptions.DESCRIPTIONS` can be simulated without an edit here.
+RobotModel = enum.StrEnum("RobotModel", {name: name for name in descriptions.names()})  # type: ignore[misc]
+
+
 @dataclass(frozen=True)
 class SimSection:
     """The ``sim:`` config section."""
 
-    robot: Literal["locobot_wx250s", "ur5e_robotiq"] = "locobot_wx250s"
+    robot: RobotModel = RobotModel["locobot_wx250s"]
     world: str = "lab"
     physics_hz: int = 240
     camera: CameraSection = field(default_factory=CameraSection)
@@ -196,7 +203,7 @@ def _check_fault_items(cfg: SimSection, world: World, section: Any) -> None:
                              + (did_you_mean(name, names) or f" ({plural}: {', '.join(sorted(names)) or 'none'})"))
     kid = cfg.faults.kidnap
     if kid is not None and kid.pose is not None:
-        radius = MODEL_INFO[cfg.robot].footprint_radius
+        radius = descriptions.get(cfg.robot).info.footprint_radius
         if not _map_clearance(world.occupancy(0.05))(kid.pose[0], kid.pose[1], radius):
             problems.add(mark("kidnap"), f"sim.faults.kidnap.pose: the base ({radius} m radius) at ({kid.pose[0]}, "
                                          f"{kid.pose[1]}) would overlap the static geometry of world {world.name!r}")
@@ -271,6 +278,7 @@ class SimRobot(Robot):
                  scene_handles: Any, injector: FaultInjector, recorder: Recorder | None) -> None:
         self.cid, self.core, self.world, self.config = cid, core, world, cfg
         self.name = f"sim:{cfg.robot}@{world.name}"
+        self.description = descriptions.get(cfg.robot)
         self.scene_handles = scene_handles
         self.injector = injector
         self.recorder = recorder
@@ -279,7 +287,7 @@ class SimRobot(Robot):
         self.occupancy = world.occupancy(0.05)
         self.scene = world.scene_boxes()
         info = core.info
-        self.base = SimBase(core, cfg.odometry_noise.model(), ("base_link",) if cfg.robot == "locobot_wx250s" else ("mobile_base_link",))
+        self.base = SimBase(core, cfg.odometry_noise.model(), info.bump_links)
         self.arm = SimArm(core)
         self.gripper = SimGripper(core)
         w, h = cfg.camera.width or info.camera_size[0], cfg.camera.height or info.camera_size[1]
@@ -431,8 +439,9 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
         p.setTimeStep(1.0 / cfg.physics_hz, physicsClientId=cid)
         p.setPhysicsEngineParameter(numSolverIterations=30, deterministicOverlappingPairs=1, physicsClientId=cid)
         handles = spawn_world(world, cid, marker_bias=cfg.faults.marker_bias)
-        info = MODEL_INFO[cfg.robot]
-        body = p.loadURDF(str(urdf_path(cfg.robot)), [world.start.x, world.start.y, 0.0],
+        description = descriptions.get(cfg.robot)
+        info = description.info
+        body = p.loadURDF(str(description.urdf_path), [world.start.x, world.start.y, 0.0],
                           p.getQuaternionFromEuler((0, 0, world.start.theta)), useFixedBase=True,
                           flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
         links, joints = {}, {}

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from mmexec.drivers.descriptions import RobotDescription, locobot_wx250s
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import (
     Arm,
@@ -478,6 +479,8 @@ class MockRobot(Robot):
     """The mock backend: a :class:`ManualClock` and in-memory capabilities.
 
     Pass ``capabilities`` to leave some out (``{"arm", "gripper"}`` is a fixed arm).
+    ``description`` is the robot model skills plan for (default: the LoCoBot WX250s,
+    whose arm joints the mock arm has; None: a robot without a description).
     :meth:`spin` advances the clock by ``period`` [s] and integrates every capability.
     Build one from a config section with :func:`mmexec.drivers.mock.backend.build`, or
     directly in tests::
@@ -495,12 +498,14 @@ class MockRobot(Robot):
         capabilities: Iterable[str] = ALL_CAPABILITIES,
         clock: ManualClock | None = None,
         name: str = "mock",
+        description: RobotDescription | None = locobot_wx250s.DESCRIPTION,
     ) -> None:
         caps = set(capabilities)
         unknown = caps - self.ALL_CAPABILITIES
         if unknown:
             raise ValueError(f"MockRobot: unknown capabilities {sorted(unknown)}")
         self.name = name
+        self.description = description
         self.clock: ManualClock = clock if clock is not None else ManualClock()
         self.profile = dict(profile or {})
         self.base: MockBase | None = MockBase(self.clock) if "base" in caps else None  # type: ignore[assignment]
