@@ -11,8 +11,10 @@ gripper checks :func:`holding` and :func:`release`, and :func:`with_arm_status`,
 emits the seed's arm states as ``arm_status`` events: ``running``, ``success``, ``fail``
 (with the reason) and ``idle``.
 
-Settings: the profile's ``arm:`` section (:class:`ArmSettings`: planning model, planner,
-speed scaling, the named poses of each role, the gripper's force and closed width).
+Settings: the profile's ``arm:`` section (:class:`ArmSettings`: planner, speed scaling,
+the named poses of each role, the gripper's force and closed width). The kinematics and
+collision model are the robot's description (``robot.description``,
+:mod:`mmexec.drivers.descriptions`).
 World model: the workspace under ``arm.workspace``, the name of the item the robot
 believes it holds under ``arm.held``.
 
@@ -34,6 +36,8 @@ from typing import Any, Literal, TypeVar
 
 import numpy as np
 
+from mmexec.config.yamlload import did_you_mean
+from mmexec.drivers.descriptions import RobotDescription, get, names
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import GraspState
 from mmexec.skills.base import (
@@ -54,8 +58,6 @@ from mmexec.skills.manipulation import (
     PlanningScene,
     PlanResult,
     time_parametrize,
-    ur5e,
-    wx250s,
 )
 from mmexec.skills.poses import arm_joints
 from mmexec.skills.profile import declare_settings, setting
@@ -100,16 +102,19 @@ GRIPPER_TIMEOUT = 10.0
 
 @dataclass(frozen=True)
 class ArmSettings:
-    """The ``arm:`` section of a robot profile: the planning model, the OMPL planner's
-    settings, speed scaling, the named poses (keys of the profile's ``named_poses``) the
+    """The ``arm:`` section of a robot profile: the robot model it is written for, the
+    grasp point, the OMPL planner's settings, speed scaling, the named poses (keys of the profile's ``named_poses``) the
     skills use in each role, and the gripper's force and closed width. Planning runs on a
     worker thread; on a wall clock each tick waits at most ``plan_slice`` [wall s] for it
     (keep it well below the tick period), then yields; on a stepped clock (sim, mock) the
     tick waits for the plan, which costs exactly one tick of clock time."""
 
-    model: Literal["locobot_wx250s", "ur5e_robotiq"] = setting(
-        "locobot_wx250s", doc="sim model name whose URDF is the planning model")
-    tcp_offset: float = setting(0.155, unit="m", ge=0, doc="UR tool: flange to the closed-grasp point")
+    model: str | None = setting(None, doc=(
+        "the robot model (mmexec.drivers.descriptions) this profile is written for: the robot's "
+        "description must be this one; planned with when the backend names none (None: any)"))
+    tcp_offset: float | None = setting(None, unit="m", ge=0, doc=(
+        "tool link to the grasp point along the approach axis (None: the robot description's: "
+        "0 on the LoCoBot, 0.155 on the UR5e + 2F-85)"))
     algorithm: Literal["rrtconnect", "rrtstar"] = setting("rrtconnect", doc="OMPL planner")
     time_limit: float = setting(1.0, unit="s", gt=0, doc="planning time per attempt")
     attempts: int = setting(3, ge=1, doc="planning attempts")
@@ -126,9 +131,16 @@ class ArmSettings:
     grasp_force: float = setting(20.0, unit="N", gt=0, doc="gripper force")
     min_held_width: float = setting(0.01, unit="m", ge=0, doc="a closed gripper narrower than this holds nothing")
 
+    def validate(self) -> list[str]:
+        """``model`` names a registered robot description."""
+        if self.model is None or self.model in names():
+            return []
+        return [f"model: unknown robot model {self.model!r}" + did_you_mean(self.model, names())
+                + f" (known: {', '.join(names())})"]
+
 
 arm_settings = declare_settings("arm", ArmSettings, package=__name__,
-                                doc="arm motion: planning model and planner, role poses, gripper force")
+                                doc="arm motion: robot model check, planner, role poses, gripper force")
 
 
 def arm_status(ctx: SkillContext, status: str, **fields: Any) -> None:
@@ -176,21 +188,24 @@ class ArmWorkspace:
 
 
 def workspace(ctx: SkillContext) -> ArmWorkspace:
-    """The run's :class:`ArmWorkspace`, built from ``profile.arm`` on first use.
-    PRECONDITION failure when the arm's joints differ from the planning model's."""
+    """The run's :class:`ArmWorkspace`, built on first use from the robot's description
+    (kinematics, collision model) and ``profile.arm``. PRECONDITION failure when the robot
+    has no description with an arm, when it is not the model ``profile.arm.model`` names,
+    or when the arm's joints differ from the description's."""
     ws = ctx.world.get(WORLD_ARM)
     settings = arm_settings(ctx)
     if isinstance(ws, ArmWorkspace) and ws.settings == settings:
         return ws
     if isinstance(ws, ArmWorkspace):
         ws.close()
-    kin = wx250s(locobot=True) if settings.model == "locobot_wx250s" else ur5e(tcp_offset=settings.tcp_offset)
+    description = _planning_description(ctx.robot.description, settings)
+    kin = ArmKinematics.from_description(description, tcp_offset=settings.tcp_offset)
     arm = ctx.robot.arm
     if arm is not None and tuple(arm.joint_names) != tuple(kin.joint_names):
         raise SkillFailure(FailureKind.PRECONDITION,
-                           f"profile.arm.model {settings.model!r} plans joints {list(kin.joint_names)}, "
+                           f"robot model {description.name!r} plans joints {list(kin.joint_names)}, "
                            f"but the arm has {list(arm.joint_names)}")
-    scene = PlanningScene(ArmModel.from_sim_model(settings.model))
+    scene = PlanningScene(ArmModel.from_description(description))
     planner = ArmPlanner(scene, kin, PlannerConfig(
         algorithm=settings.algorithm, time_limit=settings.time_limit, attempts=settings.attempts,
         velocity_scale=settings.velocity_scale, acceleration_scale=settings.acceleration_scale))
@@ -198,6 +213,24 @@ def workspace(ctx: SkillContext) -> ArmWorkspace:
     weakref.finalize(ws, _finalize, planner, ws.executor, scene)
     ctx.world[WORLD_ARM] = ws
     return ws
+
+
+def _planning_description(description: RobotDescription | None, settings: ArmSettings) -> RobotDescription:
+    """The robot's ``description`` to plan with, or the one ``settings.model`` names when
+    the backend gives none (a robot config without ``robot.description``); PRECONDITION
+    failure when there is neither, it has no arm, or the two are different models."""
+    if description is None and settings.model is not None:
+        description = get(settings.model)
+    if description is None:
+        raise SkillFailure(FailureKind.PRECONDITION, "the robot has no description to plan with: name its model "
+                           "in the config (robot.description, sim.robot or profile.arm.model: one of "
+                           f"{', '.join(names())})")
+    if settings.model is not None and settings.model != description.name:
+        raise SkillFailure(FailureKind.PRECONDITION, f"profile.arm.model {settings.model!r} is not this robot's "
+                           f"model {description.name!r}")
+    if description.arm is None:
+        raise SkillFailure(FailureKind.PRECONDITION, f"robot model {description.name!r} has no arm to plan for")
+    return description
 
 
 def _finalize(planner: ArmPlanner, executor: ThreadPoolExecutor, scene: PlanningScene) -> None:
