@@ -115,7 +115,7 @@ def pose_problems(poses: list[NamedPose], nav: NavMap, margin: float) -> list[Pr
 def binding_problems(loaded: LoadedConfig) -> list[Problem]:
     """Every problem of the profile and of its base poses on the backend's map (see the
     module doc). Import the config's skill modules first (they declare the sections)."""
-    from mmexec.skills.fetch.common import nav_margin
+    from mmexec.skills.navigation.navigate import nav_margin
 
     problems = profile_problems(loaded)
     raw = loaded.raw.get("profile")
