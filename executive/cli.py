@@ -122,6 +122,10 @@ def _parser() -> argparse.ArgumentParser:
     lr.add_argument("file", type=Path)
     lr.add_argument("--step", action="store_true", help="wait for Enter between steps")
     lr.add_argument("--request", type=int, metavar="N", help="only request N (1-based)")
+    le = lsub.add_parser("export", help="convert the log into an MCAP file for Foxglove (events, log lines, tree)")
+    le.add_argument("file", type=Path)
+    le.add_argument("--mcap", type=Path, metavar="OUT", required=True, help="the MCAP file to write (a new file)")
+    le.add_argument("--overwrite", action="store_true", help="replace an existing OUT (never a symlink)")
 
     from mmexec.executive.campaign import add_campaign_parser
 
@@ -142,12 +146,17 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int)
     p.add_argument("--log", type=Path, metavar="FILE",
                    help="event log, a new file (default mmexec-logs/<mission>-<time>-<pid>.jsonl)")
-    p.add_argument("--overwrite", action="store_true", help="replace an existing --log file (never a symlink)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing --log or --mcap file (never a symlink)")
     p.add_argument("--rate", type=float, metavar="HZ", help="tick rate, overrides the config's rate_hz")
     p.add_argument("--request-timeout", type=float, metavar="S", help="halt a request after S clock seconds")
     p.add_argument("--gui", action="store_true", help="show the simulator window (sim backend)")
     p.add_argument("--record", type=Path, metavar="FILE", help="record a video (sim backend)")
     p.add_argument("--no-recovery", action="store_true", help="disable every recovery node (ablation)")
+    p.add_argument("--foxglove", nargs="?", const="127.0.0.1:8766", metavar="HOST:PORT",
+                   help="serve the live state to Foxglove over WebSocket (default 127.0.0.1:8766)")
+    p.add_argument("--mcap", type=Path, metavar="FILE",
+                   help="record the run's Foxglove channels into a new MCAP file (docs/foxglove.md)")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -491,6 +500,7 @@ def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namesp
     from mmexec.executive.runner import Runner
 
     opts = _run_options(mission, config, requests, args, argv)
+    recording = _recording(args)
     _preload_pybullet_quietly()
     runner = Runner(opts)
     runner.prepare()
@@ -498,9 +508,26 @@ def _run(mission: Path, config: Path, requests: list[Any], args: argparse.Namesp
     _attach_operator(runner, getattr(args, "answers", None))
     _CURRENT_LOG[0] = opts.log_path
     try:
+        if recording is not None:
+            recording.attach(runner)
+            for line in recording.describe():
+                print(line, flush=True)
         return runner.run()
     finally:
         _CURRENT_LOG[0] = runner.log_path
+        if recording is not None:
+            recording.close()
+
+
+def _recording(args: argparse.Namespace | None) -> Any:
+    """The ``--foxglove`` / ``--mcap`` outputs of ``run`` and ``serve`` (None: neither);
+    a bad HOST:PORT is an InputError here, before anything is loaded."""
+    foxglove, mcap = getattr(args, "foxglove", None), getattr(args, "mcap", None)
+    if foxglove is None and mcap is None:
+        return None
+    from mmexec.executive.recording.session import Recording
+
+    return Recording(foxglove=foxglove, mcap=mcap, overwrite=bool(getattr(args, "overwrite", False)))
 
 
 def _cmd_run(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -520,14 +547,25 @@ def _cmd_serve(args: argparse.Namespace, argv: Sequence[str]) -> int:
             raise
         raise UsageError(f"mmexec serve: needs the {e.name} package (pip install fastapi uvicorn)") from None
     opts = _run_options(args.mission, args.config, [], args, argv)
+    recording = _recording(args)
     _preload_pybullet_quietly()
     _CURRENT_LOG[0] = opts.log_path
     runners: list[ServeRunner] = []
+
+    def check(runner: ServeRunner) -> None:
+        _check_params(runner)
+        if recording is not None:
+            recording.attach(runner)
+            for line in recording.describe():
+                runner.say(line)
+
     try:
-        return serve(opts, args.bind, out=sys.stdout, err=sys.stderr, check=_check_params, made=runners.append)
+        return serve(opts, args.bind, out=sys.stdout, err=sys.stderr, check=check, made=runners.append)
     finally:
         if runners:
             _CURRENT_LOG[0] = runners[0].log_path
+        if recording is not None:
+            recording.close()
 
 
 def _cmd_demo(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -610,6 +648,8 @@ def _cmd_log(args: argparse.Namespace) -> int:
     if args.log_command == "summary":
         print(printable(summary(records), multiline=True))  # a log holds user text (report messages, reasons)
         return EXIT_OK
+    if args.log_command == "export":
+        return _export(records, args)
     try:
         frames = replay_frames(records, request=args.request)
     except NoSuchRequest as e:
@@ -628,6 +668,22 @@ def _cmd_log(args: argparse.Namespace) -> int:
         count += 1
     if count == 0:
         print("no node_status records to replay" + (f" for request {args.request}" if args.request else ""))
+    return EXIT_OK
+
+
+def _export(records: Sequence[dict[str, Any]], args: argparse.Namespace) -> int:
+    """``mmexec log export LOG --mcap OUT``: see :mod:`mmexec.executive.recording.export`."""
+    from mmexec.executive.recording.export import export_records
+    from mmexec.executive.recording.session import open_mcap
+
+    if args.mcap.resolve() == args.file.resolve():
+        raise InputError.at(Mark(str(args.mcap), 1, 1), "--mcap: is the event log being exported")
+    out = open_mcap(args.mcap, overwrite=args.overwrite)
+    counts = export_records(records, out)
+    if out.error is not None:
+        raise InputError.at(Mark(str(args.mcap), 1, 1), f"--mcap: cannot write: {out.error.strerror or out.error}")
+    filled = ", ".join(f"{topic} {n}" for topic, n in sorted(counts.items()))
+    print(printable(f"wrote {args.mcap}: {sum(counts.values())} messages ({filled or 'none'})"))
     return EXIT_OK
 
 
@@ -671,7 +727,7 @@ def _command(args: argparse.Namespace, argv: list[str]) -> int:
         return _cmd_run(args, argv)
     if args.command == "log":
         if args.log_command is None:
-            raise UsageError("mmexec log: expected 'summary FILE' or 'replay FILE'")
+            raise UsageError("mmexec log: expected 'summary FILE', 'replay FILE' or 'export FILE --mcap OUT'")
         return _cmd_log(args)
     if args.command == "demo":
         return _cmd_demo(args, argv)

@@ -57,13 +57,14 @@ class BindAddress:
         return f"http://{host}:{self.port if port is None else port}"
 
 
-def parse_bind(text: str) -> BindAddress:
-    """``HOST:PORT`` (``[::1]:8765`` for IPv6); port 0 picks a free one. InputError."""
-    mark = ArgMark("--bind", 0, 0)
+def parse_bind(text: str, option: str = "--bind", example: str = DEFAULT_BIND) -> BindAddress:
+    """``HOST:PORT`` (``[::1]:8765`` for IPv6); port 0 picks a free one. InputError
+    located at ``option`` (``--foxglove`` uses it too)."""
+    mark = ArgMark(option, 0, 0)
     host, sep, port = text.rpartition(":")
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
     if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise InputError.at(mark, f"expected HOST:PORT with a port in 0..65535, e.g. {DEFAULT_BIND}, got {text!r}")
+        raise InputError.at(mark, f"expected HOST:PORT with a port in 0..65535, e.g. {example}, got {text!r}")
     return BindAddress(host, int(port))
 
 
