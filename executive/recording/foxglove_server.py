@@ -12,8 +12,8 @@ authentication: bound to anything but loopback it warns that anyone who reaches 
 sees the robot's streams.
 
 Foxglove's protocol is the ``foxglove.websocket.v1`` one; foxglove-sdk 0.30 names its
-WebSocket subprotocol ``foxglove.sdk.v1`` (the same messages) and refuses clients that
-offer only the old name: the Foxglove app and foxglove_bridge-era clients offer both.
+WebSocket subprotocol ``foxglove.sdk.v1`` (the same messages) and refuses a client that
+offers only the old name (a client may offer both).
 """
 
 from __future__ import annotations
