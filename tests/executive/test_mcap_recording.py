@@ -223,3 +223,26 @@ def test_a_seeded_sim_run_with_mcap_writes_its_recorded_event_log(tmp_path: Path
     counts = Counter(topic for topic, _, _ in _messages(mcap))
     assert counts["/mmexec/events"] == len(got) and counts["/map"] == 1
     assert counts["/camera"] > 0 and counts["/pose"] > 0  # the search's frames, the drive
+
+
+def test_a_failed_write_stops_the_recording_not_the_caller(tmp_path: Path, caplog: Any) -> None:
+    """A full disk: the first failed write is kept and logged once; later messages are
+    dropped, the file is closed, nothing raises."""
+    import errno
+
+    from mmexec.executive.recording.channels import Recorder
+    from mmexec.executive.recording.mcapfile import McapFile
+
+    out = McapFile(tmp_path / "full.mcap").open()
+    assert out._writer is not None
+
+    def full(*args: Any, **kw: Any) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    out._writer.add_message = full  # type: ignore[method-assign]
+    rec = Recorder(out)
+    for seq in range(3):
+        rec.record({"event": "report", "seq": seq, "t": 0.1 * seq, "message": "m"}, 0.1 * seq)
+    rec.close()
+    assert out.closed and out.error is not None and out.error.errno == errno.ENOSPC
+    assert [r.levelname for r in caplog.records if "write failed" in r.getMessage()] == ["ERROR"]
