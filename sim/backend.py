@@ -9,10 +9,17 @@ optional, unknown keys are errors; see docs/sim.md):
 ``physics_hz`` (240), ``camera`` (width, height, hfov, near, far, noise, pan, tilt,
 mount), ``lidar`` (beams, range_min, range_max, noise, noise_fraction, quality),
 ``odometry_noise`` (profile, linear, angular, scale, gyro_scale, gyro_bias, slip),
-``faults`` (see :mod:`mmexec.sim.faults`), ``randomize`` (false).
+``faults`` (see :mod:`mmexec.sim.faults`), ``randomize`` (false), ``truth_log`` (a
+file for the run's ground truth, :mod:`mmexec.sim.truth`; ``{seed}`` is filled in, a
+relative path is taken from the config file's folder; none by default).
 
 ``options``: ``gui`` (bool) opens the pybullet window; ``record`` (Path or None) writes a
 chase-camera video, finalised by :meth:`SimRobot.close`.
+
+:data:`BACKEND` is its :class:`~mmexec.drivers.backendspec.BackendSpec`: a simulated robot
+has every capability; ``world`` given as a path is checked when the config loads; the
+navigation map is the world's; the campaign's fault profiles set ``faults``
+(:data:`FAULTS_OFF`, :data:`FAULT_PATCHES`) and draw the world per trial (``randomize``).
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ import pybullet as p
 
 from mmexec.config.yamlload import Mark, Problems, YDict, bind, did_you_mean
 from mmexec.drivers import descriptions
+from mmexec.drivers.backendspec import CAPABILITIES, BackendSpec, NavMap, SectionFile
 from mmexec.drivers.interfaces import (
     CameraIntrinsics,
     CapabilityError,
@@ -52,7 +60,8 @@ from mmexec.sim.capabilities import (
     SimLidar,
 )
 from mmexec.sim.clearance import ClearanceMap
-from mmexec.sim.faults import FaultConfig, FaultInjector, blocking_obstacles
+from mmexec.sim.faults import FaultConfig, FaultInjector, world_extras
+from mmexec.sim.people import SimPeople
 from mmexec.sim.recording import Recorder
 from mmexec.sim.scene import (
     GROUP_ARM,
@@ -62,9 +71,11 @@ from mmexec.sim.scene import (
     GROUP_STATIC,
     spawn_world,
 )
-from mmexec.sim.world import World, load_world
+from mmexec.sim.truth import TruthLog, open_truth_log, truth_log_path
+from mmexec.sim.world import WORLDS_DIR, World, load_world
 
-__all__ = ["CameraSection", "LidarSection", "OdometrySection", "SimError", "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
+__all__ = ["BACKEND", "FAULTS_OFF", "FAULT_PATCHES", "CameraSection", "LidarSection", "OdometrySection", "SimError",
+           "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
 
 log = logging.getLogger(__name__)
 
@@ -168,6 +179,7 @@ class SimSection:
     odometry_noise: OdometrySection = field(default_factory=OdometrySection)
     faults: FaultConfig = field(default_factory=FaultConfig)
     randomize: bool = False
+    truth_log: str | None = None
 
     def validate(self) -> list[str]:
         return [] if 30 <= self.physics_hz <= 2000 else [f"physics_hz {self.physics_hz} outside 30..2000"]
@@ -309,6 +321,7 @@ class SimRobot(Robot):
         core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
         self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}
         self.physics_steps = 0  #: substeps that ran stepSimulation (the others were at rest)
+        self.truth_log: TruthLog | None = None  #: SIM-ONLY ground-truth sidecar (``sim.truth_log``)
         self._kidnap_pending = cfg.faults.kidnap is not None
         self._closed = False
 
@@ -358,6 +371,8 @@ class SimRobot(Robot):
         for _ in range(n):
             if self._kidnap_pending:
                 self._kidnap()
+            if core.people is not None:
+                core.people.step(dt, (core.true_pose.x, core.true_pose.y), core.info.footprint_radius)
             self.base.update(dt)
             if not rest:
                 self.arm.update(dt)
@@ -370,6 +385,8 @@ class SimRobot(Robot):
                 core.sync()
                 tp = core.true_pose
                 self.recorder.sample(self.clock.now(), (tp.x, tp.y), tp.theta)
+        if self.truth_log is not None:
+            self.truth_log.sample()
 
     def _kidnap(self) -> None:
         """The ``kidnap`` fault: once due, put the base at the injector's pose (the
@@ -395,6 +412,8 @@ class SimRobot(Robot):
         self.safe_stop()
         self._closed = True
         try:
+            if self.truth_log is not None:
+                self.truth_log.close()
             if self.recorder is not None:
                 self.recorder.close()
         finally:
@@ -412,9 +431,15 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
     wmark = section.value_mark("world") if isinstance(section, YDict) and "world" in section else None
     world = load_world(cfg.world, seed=seed, randomize=cfg.randomize, mark=wmark)
     _check_fault_items(cfg, world, section)
-    if cfg.faults.nav_blocked:
+    extra_obstacles, extra_people = world_extras(world, cfg.faults, seed,
+                                                 descriptions.get(cfg.robot).info.footprint_radius)
+    if extra_obstacles or extra_people:
         world = load_world(cfg.world, seed=seed, randomize=cfg.randomize, mark=wmark,
-                           extra_obstacles=blocking_obstacles(world, cfg.faults.nav_blocked, cfg.faults.nav_blocked_depth))
+                           extra_obstacles=extra_obstacles, extra_people=extra_people)
+    truth_path = None
+    if cfg.truth_log is not None:
+        tmark = section.value_mark("truth_log") if isinstance(section, YDict) else Mark("<sim>", 1, 1)
+        truth_path = truth_log_path(cfg.truth_log, tmark, seed)
     record = options.get("record")
     if record is not None:
         rp = Path(record)
@@ -467,12 +492,85 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
                        rng=np.random.default_rng(rng.integers(2**63)), faults=injector, scene=handles,
                        links=links, joints=joints, true_pose=world.start)
         core.place_base(world.start)
+        if world.people:
+            core.people = SimPeople(world.people, cid)
         recorder = Recorder(Path(record), cid) if record is not None else None
         robot = SimRobot(cid=cid, core=core, world=world, cfg=cfg, profile=dict(profile), scene_handles=handles,
                          injector=injector, recorder=recorder)
         robot.arm.set_positions(info.sleep_pose)
         robot.gripper.set_width(robot.gripper.max_width)
+        if truth_path is not None:
+            try:
+                robot.truth_log = open_truth_log(truth_path, core, world, seed, info.footprint_radius,
+                                                 robot.base.bump_heights,
+                                                 frozenset(i for i, arm in on_arm.items() if arm and i >= 0))
+            except OSError as e:
+                raise SimError(f"sim.truth_log {truth_path}: cannot write: {e.strerror or e}") from e
         return robot
     except BaseException:
         p.disconnect(physicsClientId=cid)
         raise
+
+
+# --------------------------------------------------------------------------- the backend spec
+
+
+def capabilities(cfg: SimSection) -> frozenset[str]:
+    """A simulated robot has every capability, whatever its section says."""
+    return frozenset(CAPABILITIES)
+
+
+def is_world_path(value: str) -> bool:
+    """``sim.world`` is read as a path (from the current folder) when it has a '/' or a
+    .yaml/.yml ending, as the name of a shipped world otherwise."""
+    return "/" in value or value.endswith((".yaml", ".yml"))
+
+
+def navigation(section: YDict | None) -> NavMap:
+    """The map of the section's world (nominal poses) and the simulated robot's footprint
+    radius, found without starting physics; InputError for a bad section or world file."""
+    from mmexec.sim.mapgen import world_map
+
+    cfg = parse_section(section)
+    mark = section.value_mark("world") if isinstance(section, YDict) and "world" in section else None
+    world = load_world(cfg.world, randomize=False, mark=mark)
+    return NavMap(world_map(world), descriptions.get(cfg.robot).info.footprint_radius,
+                  f"the map of world {world.name!r}")
+
+
+def item_markers(section: Mapping[str, Any] | None) -> tuple[int, ...]:
+    """The marker ids of the items of the section's world (nominal world, ``lab`` by
+    default)."""
+    world = load_world(str((section or {}).get("world", "lab")))
+    return tuple(it.marker for it in world.spec.items)
+
+
+#: Merge patch of the ``sim:`` section that switches every injected fault off (sensor and
+#: odometry noise stay as configured).
+FAULTS_OFF: dict[str, Any] = {"faults": None}
+
+#: Built-in fault profile (``mmexec campaign --faults``) -> its ``sim.faults``, on top of
+#: :data:`FAULTS_OFF` (:mod:`mmexec.sim.faults`; goal numbers count every arm goal of the
+#: trial, so in ``fetch_item`` goal 1 is the initial tuck).
+FAULT_PATCHES: dict[str, dict[str, Any]] = {
+    "arm_fail_first": {"faults": {"arm_fail_attempts": [1]}},
+    "arm_fail_second": {"faults": {"arm_fail_attempts": [2]}},
+    "arm_fail_twice": {"faults": {"arm_fail_attempts": [1, 2]}},
+    "arm_fail_always": {"faults": {"arm_fail": "always"}},
+    "sensor_dropout": {"faults": {"camera_dropout": {"p": 0.2}, "lidar_dropout": {"p": 0.2}}},
+}
+
+#: The ``sim`` backend, as the executive's registry sees it.
+BACKEND: BackendSpec[SimSection] = BackendSpec(
+    name="sim",
+    parse_section=parse_section,
+    capabilities=capabilities,
+    build=build,
+    options=frozenset({"gui", "record"}),
+    files=(SectionFile("world", "a world", (WORLDS_DIR,), is_world_path),),
+    navigation=navigation,
+    faults_off=FAULTS_OFF,
+    fault_patches=FAULT_PATCHES,
+    randomize_key="randomize",
+    item_markers=item_markers,
+)

@@ -10,7 +10,9 @@ Frames: ``base_link`` in the interfaces is the model's root link (``base_footpri
 on the floor). The robot is a fixed-base multibody moved kinematically: each substep
 the base pose is integrated from the commanded velocity (within velocity and
 acceleration limits) and the robot is placed there unless its body would intersect
-static geometry, in which case it stays and reports a bumper fault.
+static geometry (unmapped obstacles included) or a person (:mod:`mmexec.sim.people`), in
+which case it stays and reports a bumper fault on the side of the contact. Every such
+contact is also recorded on :attr:`SimCore.contacts` (ground truth, sim-only).
 """
 
 from __future__ import annotations
@@ -48,9 +50,10 @@ from mmexec.drivers.interfaces import (
 from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultInjector
 from mmexec.sim.models import ModelInfo
+from mmexec.sim.people import SimPeople
 from mmexec.sim.scene import SceneHandles
 
-__all__ = ["SimArm", "SimBase", "SimCamera", "SimClock", "SimCore", "SimGripper", "SimLidar"]
+__all__ = ["Contact", "SimArm", "SimBase", "SimCamera", "SimClock", "SimCore", "SimGripper", "SimLidar"]
 
 log = logging.getLogger(__name__)
 
@@ -78,9 +81,25 @@ def _mat(pos: Sequence[float], quat: Sequence[float]) -> np.ndarray:
     return T
 
 
+@dataclass(frozen=True)
+class Contact:
+    """A contact of the robot with another body (ground truth, sim-only): clock time
+    ``t`` [s], the robot ``part`` (``base``: a move the bumper refused; ``arm``: an arm
+    or gripper link touching static geometry or a person in a physics step), the other
+    ``body`` (a static part's name, e.g. ``shelf_far_side_l``, ``clutter_2``, or a
+    person's), and the base's true ``pose`` in ``map`` [m, m, rad]."""
+
+    t: float
+    part: str
+    body: str
+    pose: Pose2D
+
+
 @dataclass
 class SimCore:
-    """State shared by the capabilities of one simulated robot."""
+    """State shared by the capabilities of one simulated robot. ``people``: the world's
+    walking people (None: there are none); ``contacts``: every contact so far (ground
+    truth for measurement, never for skills)."""
 
     cid: int
     body: int
@@ -94,6 +113,8 @@ class SimCore:
     true_pose: Pose2D = _ORIGIN
     held_body: int | None = None
     clearance: ClearanceMap | None = None  #: static-geometry clearance for the base (set by the backend)
+    people: SimPeople | None = None
+    contacts: list[Contact] = field(default_factory=list)
     _placed: Pose2D | None = field(default=None, repr=False)
 
     def sync(self) -> None:
@@ -215,6 +236,7 @@ class SimBase(Base):
         self._faults: frozenset[str] = frozenset()
         self._bump_links = tuple(core.links[n] for n in bump_links)
         self.bumps = 0  #: number of substeps refused for collision (for tests and scoring)
+        self._touching = ""  # the body the last refused move touched ("" after a move)
         self.exact_checks = 0  #: substeps that needed the exact getClosestPoints test (benchmarks)
         # disk around the base origin holding the bumper bodies at any yaw, and their heights
         core.sync()
@@ -247,15 +269,36 @@ class SimBase(Base):
         """Sim-only: set the odometry estimate (as a localisation fix would)."""
         self._est = pose
 
-    def _collides(self) -> tuple[bool, float]:
-        """Whether the base body intersects static geometry, and the contact bearing [rad]."""
+    def _collides(self) -> tuple[bool, float, str]:
+        """Whether the base body intersects static geometry, the contact bearing [rad] and
+        the static part's name."""
         c = self._c
         for li in self._bump_links:
             for pt in p.getClosestPoints(c.body, c.scene.static, 0.0, linkIndexA=li, physicsClientId=c.cid):
                 if pt[8] < -1e-4:
                     d = np.array(pt[5]) - np.array([c.true_pose.x, c.true_pose.y, 0.0])
-                    return True, wrap_angle(math.atan2(d[1], d[0]) - c.true_pose.theta)
-        return False, 0.0
+                    names = c.scene.static_names
+                    name = names[pt[4]] if 0 <= pt[4] < len(names) else "static"
+                    return True, wrap_angle(math.atan2(d[1], d[0]) - c.true_pose.theta), name
+        return False, 0.0, ""
+
+    def _touches_person(self, pose: Pose2D) -> tuple[bool, float, str]:
+        """Whether the base body at ``pose`` (already placed) intersects a person: a
+        footprint-disk test first, the exact one for the people it cannot rule out."""
+        c = self._c
+        people = c.people
+        if people is None or not len(people):
+            return False, 0.0, ""
+        near = np.flatnonzero(people.gaps(pose.x, pose.y, self.bump_radius) < 0.0)
+        if near.size:
+            c.sync()
+        for k in near:
+            for li in self._bump_links:
+                for pt in p.getClosestPoints(c.body, people.bodies[k], 0.0, linkIndexA=li, physicsClientId=c.cid):
+                    if pt[8] < -1e-4:
+                        d = np.array(pt[5]) - np.array([pose.x, pose.y, 0.0])
+                        return True, wrap_angle(math.atan2(d[1], d[0]) - pose.theta), people.names[k]
+        return False, 0.0, ""
 
     def update(self, dt: float) -> None:
         now = self._c.clock.now()
@@ -273,19 +316,25 @@ class SimBase(Base):
         th = old.theta + self._w * dt / 2
         new = Pose2D(old.x + self._v * dt * math.cos(th), old.y + self._v * dt * math.sin(th), wrap_angle(old.theta + self._w * dt))
         c.true_pose = new  # the body follows lazily (SimCore.sync)
-        hit, ang = False, 0.0
+        hit, ang, what = False, 0.0, ""
         if c.clearance is None or not c.clearance.clear(new.x, new.y, self.bump_radius):
             self.exact_checks += 1
             c.sync()
-            hit, ang = self._collides()
+            hit, ang, what = self._collides()
+        if not hit:
+            hit, ang, what = self._touches_person(new)
         if hit:
             c.place_base(old)
             side = "bumper_left" if ang > 0.35 else "bumper_right" if ang < -0.35 else "bumper_centre"
             self._faults = frozenset({side})
             self._v = self._w = 0.0
             self.bumps += 1
+            if what != self._touching:  # one contact per body until the base moves again
+                c.contacts.append(Contact(now, "base", what, old))
+                self._touching = what
             return
         self._faults = frozenset()
+        self._touching = ""
         # odometry: integrate the measured increments with multiplicative noise
         ds, dth = self._v * dt, self._w * dt
         n = self._noise
@@ -320,7 +369,8 @@ class SimArm(Arm):
         lims = []
         for n, i in zip(core.info.arm_joints, self._idx):
             ji = p.getJointInfo(core.body, i, physicsClientId=core.cid)
-            lims.append(JointLimit(n, ji[8], ji[9], ji[11], effort=ji[10]))
+            lower, upper = (ji[8], ji[9]) if ji[8] <= ji[9] else (-math.inf, math.inf)  # continuous: 0 > -1
+            lims.append(JointLimit(n, lower, upper, ji[11], effort=ji[10]))
         self._limits = tuple(lims)
         self._goal: Goal | None = None
         self._traj: JointTrajectory | None = None

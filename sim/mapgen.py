@@ -6,7 +6,9 @@ on the map and scene the sim uses: :func:`world_map` is the sim's own navigation
 as a map_server map (YAML + 8-bit PGM) with the world's laser reflectors under a
 ``reflectors:`` key, and :func:`scene_yaml` prints the
 world's static boxes (:meth:`~mmexec.sim.world.World.scene_boxes`) as ``robot.scene``
-entries of a run config. ``config/maps/lab.{yaml,pgm}`` were written by::
+entries of a run config. Both are what the robot is told: obstacles marked ``unmapped``
+and the world's people are left out of the map and the scene (the lidar finds them).
+``config/maps/lab.{yaml,pgm}`` were written by::
 
     .venv/bin/python -m mmexec.sim.mapgen lab config/maps/lab.yaml
 
@@ -42,12 +44,14 @@ def _world(world: World | str | Path) -> World:
 def world_map(world: World | str | Path, resolution: float = 0.05) -> OccupancyGrid:
     """The sim's occupancy grid of ``world`` (a loaded world, a shipped world's name or a
     world file) at its nominal poses: walls, shelves, tables, depots, obstacles and
-    reflectors 100, the rest of the room 0; origin at the outer wall corner."""
+    reflectors 100, the rest of the room 0 (unmapped obstacles and people too); origin
+    at the outer wall corner."""
     return _world(world).occupancy(resolution)
 
 
 def scene_yaml(world: World | str | Path, indent: int = 4) -> str:
-    """The world's static boxes as ``robot.scene`` lines, one flow mapping each:
+    """The world's static boxes, unmapped obstacles left out, as ``robot.scene`` lines,
+    one flow mapping each:
     ``- {name, size [m], xyz [m] (box centre in map), rpy [rad]}`` (every box of a world
     is upright, so rpy is [0, 0, yaw])."""
     pad = " " * indent

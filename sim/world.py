@@ -10,6 +10,12 @@ Shelf convention: a shelf's ``pose`` yaw is the direction its open front faces; 
 ``width`` runs along the shelf's local y, ``depth`` along local x. An item placed on a
 shelf faces the same way, and its marker sits on the item's local +x face, so markers
 point into the room.
+
+What the robot is told and what is there differ in two ways: an obstacle marked
+``unmapped: true`` is in the physics world and the lidar's view but not in the map
+(:meth:`World.occupancy`) or the planning scene (:meth:`World.scene_boxes`) given to the
+robot, and ``people`` are kinematic cylinders walking waypoint loops
+(:class:`Person`; moved by :mod:`mmexec.sim.people`), never in the map either.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ __all__ = [
     "Depot",
     "Item",
     "Obstacle",
+    "Person",
     "Randomize",
     "Reflector",
     "Room",
@@ -170,12 +177,15 @@ class Depot:
 @dataclass(frozen=True)
 class Obstacle:
     """A static ``box`` (``size`` [x, y, z]) or ``cylinder`` (``size`` [diameter, _, height])
-    at ``pose`` [x, y, yaw] standing on the floor."""
+    at ``pose`` [x, y, yaw] standing on the floor. ``unmapped``: in the physics world and
+    the lidar's view, but left out of the map and the planning scene the robot is given
+    (something put down since the map was made)."""
 
     name: str
     pose: tuple[float, float, float]
     size: tuple[float, float, float]
     shape: Literal["box", "cylinder"] = "box"
+    unmapped: bool = False
 
     def validate(self) -> list[str]:
         dims = self.size if self.shape == "box" else (self.size[0], self.size[2])
@@ -195,21 +205,73 @@ class Reflector:
         return _positive(f"reflector {self.name!r}: radius and height", self.radius, self.height)
 
 
+#: walking speeds [m/s] a randomised person's speed is kept within
+PERSON_SPEEDS = (0.3, 1.2)
+
+
+@dataclass(frozen=True)
+class Person:
+    """A walking person: an upright kinematic cylinder of ``radius`` and ``height`` [m]
+    that walks the closed loop of ``waypoints`` ``[[x, y], ...]`` in ``map`` (the last leg
+    back to the first; two waypoints walk back and forth) at ``speed`` [m/s] and stands
+    ``pause`` [s] at each waypoint. It starts at the first waypoint after ``delay`` [s]
+    of clock time and, when ``trigger`` [m] is given, not before the robot's true position
+    has come within that distance of it. A person never steps closer than 0.1 m to the
+    robot's footprint (they wait), so a contact is the robot's doing."""
+
+    name: str
+    waypoints: tuple[tuple[float, float], ...]
+    radius: float = 0.2
+    height: float = 1.7
+    speed: float = 0.8
+    pause: float = 0.0
+    delay: float = 0.0
+    trigger: float | None = None
+
+    def validate(self) -> list[str]:
+        out = []
+        if len(self.waypoints) < 2:
+            out.append(f"person {self.name!r}: waypoints needs at least 2 points, got {len(self.waypoints)}")
+        legs = zip(self.waypoints, self.waypoints[1:] + self.waypoints[:1])
+        if any(math.hypot(b[0] - a[0], b[1] - a[1]) < 1e-6 for a, b in legs):
+            out.append(f"person {self.name!r}: two consecutive waypoints are the same point")
+        if not 0.1 <= self.radius <= 0.4:
+            out.append(f"person {self.name!r}: radius {self.radius:g} m outside [0.1, 0.4]")
+        if self.height <= 0:
+            out.append(f"person {self.name!r}: height must be > 0")
+        if not 0 < self.speed <= 2.0:
+            out.append(f"person {self.name!r}: speed {self.speed:g} m/s outside (0, 2]")
+        if self.pause < 0 or self.delay < 0:
+            out.append(f"person {self.name!r}: pause and delay must be >= 0 s")
+        if self.trigger is not None and self.trigger <= 0:
+            out.append(f"person {self.name!r}: trigger must be > 0 m")
+        return out
+
+
 @dataclass(frozen=True)
 class Randomize:
     """Uniform jitter half-ranges applied when the backend is asked to randomise:
     items slide along their shelf/table by ``item_xy`` [m] and turn by ``item_yaw``
     [rad]; the start pose moves by ``start_xy`` [m] and ``start_yaw`` [rad]; obstacles
-    move by ``obstacle_xy`` [m]."""
+    move by ``obstacle_xy`` [m]. People: each waypoint moves by ``person_xy`` [m] (kept
+    in the room), the speed by ``person_speed`` [m/s] (kept within
+    :data:`PERSON_SPEEDS`), and the pause and the start delay grow by up to
+    ``person_pause`` and ``person_delay`` [s]. People are drawn after everything else, so
+    a world without people draws what it always drew."""
 
     item_xy: float = 0.0
     item_yaw: float = 0.0
     start_xy: float = 0.0
     start_yaw: float = 0.0
     obstacle_xy: float = 0.0
+    person_xy: float = 0.0
+    person_speed: float = 0.0
+    person_pause: float = 0.0
+    person_delay: float = 0.0
 
     def validate(self) -> list[str]:
-        if min(self.item_xy, self.item_yaw, self.start_xy, self.start_yaw, self.obstacle_xy) < 0:
+        if min(self.item_xy, self.item_yaw, self.start_xy, self.start_yaw, self.obstacle_xy, self.person_xy,
+               self.person_speed, self.person_pause, self.person_delay) < 0:
             return ["randomize: half-ranges must be >= 0"]
         return []
 
@@ -227,6 +289,7 @@ class WorldSpec:
     depots: tuple[Depot, ...] = ()
     obstacles: tuple[Obstacle, ...] = ()
     reflectors: tuple[Reflector, ...] = ()
+    people: tuple[Person, ...] = ()
     randomize: Randomize = field(default_factory=Randomize)
     description: str = ""
 
@@ -238,10 +301,12 @@ def _T(x: float, y: float, z: float, yaw: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class World:
-    """A loaded world with concrete item, obstacle and start poses (after randomisation).
+    """A loaded world with concrete item, obstacle, people and start poses (after
+    randomisation).
 
     ``item_poses[name]`` is ``T_map_item`` (box centre, marker on the local +x face);
-    ``start`` is the robot's true start pose in ``map``.
+    ``start`` is the robot's true start pose in ``map``; ``people`` walk as given here
+    (waypoints, speeds, pauses drawn).
     """
 
     spec: WorldSpec
@@ -249,6 +314,7 @@ class World:
     item_poses: Mapping[str, np.ndarray]
     obstacles: tuple[Obstacle, ...]
     start: Pose2D
+    people: tuple[Person, ...] = ()
 
     @property
     def name(self) -> str:
@@ -263,6 +329,10 @@ class World:
     def item_names(self) -> tuple[str, ...]:
         return tuple(it.name for it in self.spec.items)
 
+    def unmapped_names(self) -> frozenset[str]:
+        """Names of the obstacles the robot's map and planning scene leave out."""
+        return frozenset(o.name for o in self.obstacles if o.unmapped)
+
     def marker_of(self, name: str) -> int:
         return self.item(name).marker
 
@@ -271,7 +341,8 @@ class World:
     def static_boxes(self) -> list[tuple[str, np.ndarray, tuple[float, float, float], str]]:
         """Every static box as ``(name, T_map_box centre, full size, kind)``; kind is
         ``wall``, ``shelf``, ``table``, ``depot``, ``obstacle`` or ``reflector``
-        (cylinders appear as their bounding box)."""
+        (cylinders appear as their bounding box). This is the physical world, unmapped
+        obstacles included (:meth:`unmapped_names`); people are not static."""
         out: list[tuple[str, np.ndarray, tuple[float, float, float], str]] = []
         r = self.spec.room
         sx, sy = r.size
@@ -321,13 +392,16 @@ class World:
 
     def scene_boxes(self) -> tuple[SceneBox, ...]:
         """Static boxes for arm planning (walls, shelf boards and panels, tables, depot
-        walls, obstacles), ``pose`` = ``T_map_box`` centre, ``size`` full extents [m]."""
-        return tuple(SceneBox(n, T, s) for n, T, s, _ in self.static_boxes())
+        walls, obstacles), ``pose`` = ``T_map_box`` centre, ``size`` full extents [m]: the
+        robot's prior knowledge, so unmapped obstacles are left out."""
+        hidden = self.unmapped_names()
+        return tuple(SceneBox(n, T, s) for n, T, s, _ in self.static_boxes() if n not in hidden)
 
     def occupancy(self, resolution: float = 0.05) -> OccupancyGrid:
         """A map_server-style grid in ``map``: 100 where a wall, shelf, table, depot,
         obstacle or reflector footprint covers the cell centre, 0 elsewhere inside the
-        room. The grid covers the room plus its walls; ``origin`` is its lower-left corner."""
+        room. The grid covers the room plus its walls; ``origin`` is its lower-left corner.
+        This is the map the robot is given: unmapped obstacles and people are not in it."""
         if resolution <= 0:
             raise ValueError(f"resolution must be > 0, got {resolution}")
         r = self.spec.room
@@ -340,8 +414,9 @@ class World:
         X, Y = np.meshgrid(xs, ys)
         data = np.zeros((h, w), dtype=np.int8)
         data[(X < 0) | (Y < 0) | (X > r.size[0]) | (Y > r.size[1])] = 100
-        for _, T, size, kind in self.static_boxes():
-            if T[2, 3] - size[2] / 2 > 0.5:  # floats above anything the base can hit
+        hidden = self.unmapped_names()
+        for name, T, size, _kind in self.static_boxes():
+            if T[2, 3] - size[2] / 2 > 0.5 or name in hidden:  # floats above anything the base can hit; unmapped
                 continue
             dx, dy = X - T[0, 3], Y - T[1, 3]
             lx = T[0, 0] * dx + T[1, 0] * dy
@@ -378,11 +453,13 @@ def load_world(
     randomize: bool = False,
     mark: Mark | None = None,
     extra_obstacles: tuple[Obstacle, ...] = (),
+    extra_people: tuple[Person, ...] = (),
 ) -> World:
     """Load a shipped world by name (``"lab"``) or a world file by path, check it, and
-    place items, obstacles and the start pose (jittered from ``seed`` when
+    place items, obstacles, the start pose and people (jittered from ``seed`` when
     ``randomize``). ``mark`` locates ``name_or_path`` in a config for the error when the
-    name is unknown. Raises :class:`InputError` naming ``FILE:LINE:COL`` on any problem."""
+    name is unknown. ``extra_obstacles`` and ``extra_people`` (fault injection) are added
+    as given. Raises :class:`InputError` naming ``FILE:LINE:COL`` on any problem."""
     path = _resolve(name_or_path, mark)
     raw = load_yaml(path)
     problems = Problems()
@@ -405,7 +482,8 @@ def load_world(
     sx, sy, syaw = spec.start
     start = Pose2D(sx + rng.uniform(-rz.start_xy, rz.start_xy), sy + rng.uniform(-rz.start_xy, rz.start_xy),
                    wrap_angle(syaw + rng.uniform(-rz.start_yaw, rz.start_yaw)))
-    return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start)
+    people = tuple(_place_person(spec.room, pe, rng, rz) for pe in spec.people) + tuple(extra_people)
+    return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start, people=people)
 
 
 def mark_of_raw(raw: Any, default: Mark) -> Mark:
@@ -423,16 +501,20 @@ def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
     """Names unique, references resolve, items fit their shelves, everything in the room."""
     seen: dict[str, str] = {}
     sx, sy = spec.room.size
-    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors"):
+    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors", "people"):
         marks = _list_marks(raw, key)
         for i, obj in enumerate(getattr(spec, key)):
             m = marks[i] if i < len(marks) else raw.mark
             if obj.name in seen:
                 problems.add(m, f"{key}[{i}].name: {obj.name!r} already names a {seen[obj.name]}")
-            seen[obj.name] = key.rstrip("s")
+            seen[obj.name] = "person" if key == "people" else key.rstrip("s")
             xy = getattr(obj, "pose", None) or getattr(obj, "position", None)
             if xy is not None and not (0 <= xy[0] <= sx and 0 <= xy[1] <= sy):
                 problems.add(m, f"{key}[{i}]: {obj.name!r} at ({xy[0]}, {xy[1]}) is outside the {sx} x {sy} m room")
+            for j, (wx, wy) in enumerate(getattr(obj, "waypoints", ())):
+                if not (0 <= wx <= sx and 0 <= wy <= sy):
+                    problems.add(m, f"{key}[{i}].waypoints[{j}]: {obj.name!r} at ({wx}, {wy}) is outside the "
+                                    f"{sx} x {sy} m room")
     markers: dict[int, str] = {}
     shelves = {s.name: s for s in spec.shelves}
     tables = {t.name: t for t in spec.tables}
@@ -468,6 +550,27 @@ def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
     st = spec.start
     if not (0 < st[0] < sx and 0 < st[1] < sy):
         problems.add(raw.value_mark("start"), f"start: ({st[0]}, {st[1]}) is outside the {sx} x {sy} m room")
+
+
+def _place_person(room: Room, pe: Person, rng: np.random.Generator, rz: Randomize) -> Person:
+    """``pe`` with its waypoints, speed, pause and delay jittered by ``rz`` (nothing is
+    drawn for a zero half-range); waypoints stay ``radius`` inside the room."""
+    sx, sy = room.size
+    out = pe
+    if rz.person_xy > 0:
+        pts = []
+        for x, y in pe.waypoints:
+            jx, jy = rng.uniform(-rz.person_xy, rz.person_xy, 2)
+            pts.append((float(np.clip(x + jx, pe.radius, sx - pe.radius)), float(np.clip(y + jy, pe.radius, sy - pe.radius))))
+        out = replace(out, waypoints=tuple(pts))
+    if rz.person_speed > 0:
+        lo, hi = PERSON_SPEEDS
+        out = replace(out, speed=float(np.clip(pe.speed + rng.uniform(-rz.person_speed, rz.person_speed), lo, hi)))
+    if rz.person_pause > 0:
+        out = replace(out, pause=pe.pause + float(rng.uniform(0.0, rz.person_pause)))
+    if rz.person_delay > 0:
+        out = replace(out, delay=pe.delay + float(rng.uniform(0.0, rz.person_delay)))
+    return out
 
 
 def _place_item(spec: WorldSpec, it: Item, rng: np.random.Generator, rz: Randomize) -> np.ndarray:

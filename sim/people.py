@@ -1,0 +1,149 @@
+"""People in the simulation: kinematic cylinders walking waypoint loops.
+
+Each :class:`~mmexec.sim.world.Person` of a world (its ``people:`` section, or drawn by
+the ``crowd`` fault, :func:`mmexec.sim.faults.crowd_people`) becomes a massless pybullet
+cylinder that the lidar and the camera see and the base's bumper feels
+(:class:`mmexec.sim.capabilities.SimBase`). :meth:`SimPeople.step` moves them every
+physics substep, as the base is moved: no physics acts on them and they act on nothing
+(no forces: an arm or an item touching one is blocked by a body of infinite mass).
+
+A person's walk, per substep of ``dt`` seconds:
+
+1. ``trigger`` (optional): stand at the first waypoint until the robot's true position is
+   within ``trigger`` metres;
+2. ``delay``: stand there ``delay`` more seconds;
+3. walk the closed loop of waypoints at ``speed``, standing ``pause`` seconds at each
+   waypoint reached.
+
+People are polite: a person stands still for the substep when the step would bring them
+closer than :data:`YIELD_GAP` to the robot's footprint circle (and closer than they are),
+so they never walk into the robot; a contact with a person is the robot's doing. People
+do not avoid each other (they may overlap; neither the lidar nor the robot minds).
+
+Frames: ``map``; metres, seconds. Sim-only; skills never see this module.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pybullet as p
+
+from mmexec.sim.scene import GROUP_ARM, GROUP_ITEM, GROUP_QUERY, GROUP_STATIC
+from mmexec.sim.world import Person
+
+__all__ = ["YIELD_GAP", "SimPeople", "Walk"]
+
+#: [m] the smallest gap a person leaves between themselves and the robot's footprint circle
+YIELD_GAP = 0.1
+#: RGBA of a person's body (a dark blue coat: a distinct colour in camera frames)
+_COLOUR = (0.15, 0.2, 0.45, 1.0)
+
+
+@dataclass
+class Walk:
+    """Where one person is in their walk: ``phase`` (``trigger``, ``delay``, ``walk`` or
+    ``pause``), the leg (from waypoint ``leg`` to the next), ``along`` [m] on it, the
+    seconds left of the delay or pause (``timer``), the position ``xy`` [m] in ``map``."""
+
+    phase: str
+    leg: int
+    along: float
+    timer: float
+    xy: tuple[float, float]
+
+
+class SimPeople:
+    """The people of one simulated world, moved kinematically (see the module docstring).
+
+    ``people`` as loaded (:attr:`mmexec.sim.world.World.people`); ``cid`` the pybullet
+    client. Bodies are created here, one per person, standing at their first waypoint."""
+
+    def __init__(self, people: Sequence[Person], cid: int) -> None:
+        self.people = tuple(people)
+        self._cid = cid
+        self.names = tuple(pe.name for pe in self.people)
+        self.radii = np.array([pe.radius for pe in self.people], dtype=float)
+        self._legs = [self._leg_table(pe) for pe in self.people]
+        self.walks = [Walk("trigger" if pe.trigger is not None else "delay" if pe.delay > 0 else "walk", 0, 0.0,
+                           pe.delay, pe.waypoints[0]) for pe in self.people]
+        self.bodies: list[int] = []
+        for pe in self.people:
+            col = p.createCollisionShape(p.GEOM_CYLINDER, radius=pe.radius, height=pe.height, physicsClientId=cid)
+            vis = p.createVisualShape(p.GEOM_CYLINDER, radius=pe.radius, length=pe.height, rgbaColor=_COLOUR,
+                                      physicsClientId=cid)
+            x, y = pe.waypoints[0]
+            body = p.createMultiBody(0.0, col, vis, [x, y, pe.height / 2], physicsClientId=cid)
+            p.setCollisionFilterGroupMask(body, -1, GROUP_STATIC, GROUP_QUERY | GROUP_ITEM | GROUP_ARM,
+                                          physicsClientId=cid)
+            self.bodies.append(body)
+        self._placed = [w.xy for w in self.walks]
+
+    def __len__(self) -> int:
+        return len(self.people)
+
+    @staticmethod
+    def _leg_table(pe: Person) -> list[tuple[tuple[float, float], tuple[float, float], float]]:
+        """``(from, to, length [m])`` of each leg of the closed loop."""
+        pts = list(pe.waypoints)
+        return [(a, b, math.hypot(b[0] - a[0], b[1] - a[1])) for a, b in zip(pts, pts[1:] + pts[:1])]
+
+    def positions(self) -> np.ndarray:
+        """Centres (k, 2) [m] in ``map``."""
+        return np.array([w.xy for w in self.walks], dtype=float).reshape(-1, 2)
+
+    def gaps(self, x: float, y: float, radius: float) -> np.ndarray:
+        """Gap [m] (k,) between a circle of ``radius`` at ``(x, y)`` and each person
+        (centre distance minus both radii; negative: they overlap)."""
+        c = self.positions()
+        return np.hypot(c[:, 0] - x, c[:, 1] - y) - self.radii - radius
+
+    def step(self, dt: float, robot_xy: tuple[float, float], robot_radius: float) -> None:
+        """Advance every person by ``dt`` [s] of clock time, the robot's true centre at
+        ``robot_xy`` [m] with a footprint of ``robot_radius`` [m], and put the bodies
+        there."""
+        for i, pe in enumerate(self.people):
+            w = self.walks[i]
+            if w.phase == "trigger":
+                assert pe.trigger is not None
+                if math.hypot(w.xy[0] - robot_xy[0], w.xy[1] - robot_xy[1]) <= pe.trigger:
+                    w.phase = "delay" if pe.delay > 0 else "walk"
+                continue
+            if w.phase in ("delay", "pause"):
+                w.timer -= dt
+                if w.timer <= 0.0:
+                    w.phase, w.timer = "walk", 0.0
+                continue
+            self._walk(i, pe, w, dt, robot_xy, robot_radius)
+        for i, w in enumerate(self.walks):
+            if w.xy != self._placed[i]:
+                pe = self.people[i]
+                p.resetBasePositionAndOrientation(self.bodies[i], [w.xy[0], w.xy[1], pe.height / 2], [0, 0, 0, 1],
+                                                  physicsClientId=self._cid)
+                self._placed[i] = w.xy
+
+    def _walk(self, i: int, pe: Person, w: Walk, dt: float, robot_xy: tuple[float, float],
+              robot_radius: float) -> None:
+        """One substep of walking for person ``i`` (the rules of the module docstring)."""
+        legs = self._legs[i]
+        along, leg = w.along + pe.speed * dt, w.leg
+        arrived = along >= legs[leg][2] - 1e-9
+        if arrived:
+            leg, along = (leg + 1) % len(legs), 0.0
+            xy = legs[leg][0]
+        else:
+            (ax, ay), (bx, by), length = legs[leg]
+            f = along / length
+            xy = (ax + f * (bx - ax), ay + f * (by - ay))
+        rx, ry = robot_xy
+        gap_new = math.hypot(xy[0] - rx, xy[1] - ry) - pe.radius - robot_radius
+        if gap_new < YIELD_GAP:
+            gap_now = math.hypot(w.xy[0] - rx, w.xy[1] - ry) - pe.radius - robot_radius
+            if gap_new < gap_now:
+                return  # stand aside: the robot is in the way
+        w.xy, w.leg, w.along = xy, leg, along
+        if arrived and pe.pause > 0:
+            w.phase, w.timer = "pause", pe.pause

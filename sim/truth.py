@@ -1,0 +1,208 @@
+"""Ground truth of a simulated run for measurement: a JSON-lines sidecar (sim-only).
+
+Skills never read it (they cannot: skills do not import ``sim``); campaigns and the figure
+scripts do. The backend writes it when the config's ``sim.truth_log`` names a file
+(:func:`open_truth_log`): one record per control tick with the robot's *true* pose, its
+true clearance and its gap to every person, and one record per contact. Records (all in
+``map``; m, rad, s):
+
+=================  ========================================================================
+``truth_start``    world name, seed, the robot's footprint radius, the world's obstacles
+                   (name, pose, size, shape, unmapped) and people (name, radius, waypoints)
+``truth``          per tick: ``t``, true ``pose`` [x, y, theta], ``clearance`` (distance
+                   from the base centre to the nearest static geometry the base can touch,
+                   unmapped obstacles included, less the footprint radius), ``nearest``
+                   (that part's name), ``people`` ([x, y] each) and ``gaps`` (centre
+                   distance less both radii, each)
+``contact``        ``t``, ``part`` (``base``: a move the bumper refused; ``arm``: an arm
+                   link touching static geometry or a person), ``body`` hit, ``pose``
+``truth_end``      ticks, the smallest clearance (and where), the smallest gap per person,
+                   the number of contacts and the bodies they were with
+=================  ========================================================================
+
+The clearance uses the footprint *circle* (``footprint_radius``): exact for the
+LoCoBot's round Kobuki, conservative for a rectangular platform. Only static parts whose
+height range overlaps the base's bumper bodies count (a table top above the base is not
+something the base can touch), as for the bumper itself.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+import pybullet as p
+
+from mmexec.config.yamlload import InputError, Mark
+from mmexec.drivers.interfaces import Pose2D
+from mmexec.sim.capabilities import Contact, SimCore
+from mmexec.sim.world import World
+
+__all__ = ["StaticFootprints", "TruthLog", "open_truth_log", "truth_log_path"]
+
+log = logging.getLogger(__name__)
+
+
+class StaticFootprints:
+    """The floor plan of a world's static parts whose height range overlaps ``z_range``
+    [m]: rectangles and circles in ``map``, for exact point distances."""
+
+    def __init__(self, world: World, z_range: tuple[float, float]) -> None:
+        circles = {o.name for o in world.obstacles if o.shape == "cylinder"} | {r.name for r in world.spec.reflectors}
+        rect_names: list[str] = []
+        rects: list[tuple[float, float, float, float, float, float]] = []
+        circ_names: list[str] = []
+        circs: list[tuple[float, float, float]] = []
+        lo, hi = z_range
+        for name, T, size, _kind in world.static_boxes():
+            if T[2, 3] + size[2] / 2 < lo or T[2, 3] - size[2] / 2 > hi:
+                continue
+            if name in circles:
+                circ_names.append(name)
+                circs.append((T[0, 3], T[1, 3], size[0] / 2))
+            else:
+                rect_names.append(name)
+                rects.append((T[0, 3], T[1, 3], T[0, 0], T[1, 0], size[0] / 2, size[1] / 2))
+        self.names = rect_names + circ_names
+        self._rects = np.array(rects, dtype=float).reshape(-1, 6)
+        self._circs = np.array(circs, dtype=float).reshape(-1, 3)
+
+    def distance(self, x: float, y: float) -> tuple[float, str]:
+        """The distance [m] from map point ``(x, y)`` to the nearest part (0 inside one)
+        and that part's name (``inf`` and "" without parts)."""
+        r, c = self._rects, self._circs
+        dx, dy = x - r[:, 0], y - r[:, 1]
+        lx = np.abs(r[:, 2] * dx + r[:, 3] * dy) - r[:, 4]
+        ly = np.abs(-r[:, 3] * dx + r[:, 2] * dy) - r[:, 5]
+        d_rect = np.hypot(np.maximum(lx, 0.0), np.maximum(ly, 0.0))
+        d_circ = np.maximum(np.hypot(x - c[:, 0], y - c[:, 1]) - c[:, 2], 0.0)
+        d = np.concatenate([d_rect, d_circ])
+        if d.size == 0:
+            return math.inf, ""
+        k = int(np.argmin(d))
+        return float(d[k]), self.names[k]
+
+
+def truth_log_path(template: str, config_mark: Mark, seed: int | None) -> Path:
+    """The sidecar's path: ``template`` with ``{seed}`` replaced by the run seed (``none``
+    without one), relative to the folder of the config file ``config_mark`` names (the
+    working directory for a config that is not a file). InputError at the mark for an
+    unknown ``{...}`` field."""
+    try:
+        name = template.format(seed="none" if seed is None else seed)
+    except (KeyError, IndexError, ValueError) as e:
+        raise InputError.at(config_mark, f"sim.truth_log: {template!r}: only {{seed}} may be filled in ({e})") from e
+    path = Path(name)
+    folder = Path(config_mark.file).parent if not config_mark.file.startswith("<") else Path.cwd()
+    return path if path.is_absolute() else folder / path
+
+
+class TruthLog:
+    """Writes the ground-truth sidecar of one run (see the module docstring). Create with
+    :func:`open_truth_log`; :meth:`sample` once per control tick; :meth:`close` at the end."""
+
+    def __init__(self, stream: IO[str], core: SimCore, world: World, seed: int | None,
+                 footprint_radius: float, z_range: tuple[float, float], arm_links: frozenset[int]) -> None:
+        self._out = stream
+        self._core = core
+        self._radius = footprint_radius
+        self._static = StaticFootprints(world, z_range)
+        self._arm_links = arm_links
+        self._seen_contacts = len(core.contacts)
+        self._arm_touching: frozenset[tuple[int, int]] = frozenset()
+        self.ticks = 0
+        self.min_clearance = (math.inf, "")
+        people = core.people
+        self.min_gap = dict.fromkeys(people.names if people is not None else (), math.inf)
+        self.contacts = 0
+        self.contact_bodies: dict[str, int] = {}
+        self._write("truth_start", world=world.name, seed=seed, robot_radius=footprint_radius,
+                    obstacles=[{"name": o.name, "pose": list(o.pose), "size": list(o.size), "shape": o.shape,
+                                "unmapped": o.unmapped} for o in world.obstacles],
+                    people=[{"name": pe.name, "radius": pe.radius, "waypoints": [list(w) for w in pe.waypoints]}
+                            for pe in (people.people if people is not None else ())])
+
+    def _write(self, event: str, **fields: Any) -> None:
+        self._out.write(json.dumps({"event": event, **fields}, separators=(",", ":")) + "\n")
+
+    def _contact(self, c: Contact) -> None:
+        self.contacts += 1
+        self.contact_bodies[c.body] = self.contact_bodies.get(c.body, 0) + 1
+        self._write("contact", t=round(c.t, 4), part=c.part, body=c.body,
+                    pose=[round(c.pose.x, 4), round(c.pose.y, 4), round(c.pose.theta, 4)])
+
+    def _arm_contacts(self, now: float, pose: Pose2D) -> None:
+        """Arm links touching static geometry or a person in the last physics step, each
+        new touching pair once."""
+        core = self._core
+        others = {core.scene.static: None}
+        if core.people is not None:
+            others.update({b: k for k, b in enumerate(core.people.bodies)})
+        touching: set[tuple[int, int]] = set()
+        for pt in p.getContactPoints(bodyA=core.body, physicsClientId=core.cid):
+            if pt[2] in others and pt[3] in self._arm_links and pt[8] < 0.0:
+                touching.add((pt[2], pt[4]))
+        for body, link in sorted(touching - self._arm_touching):
+            k = others[body]
+            if k is not None:
+                assert core.people is not None
+                name = core.people.names[k]
+            else:
+                names = core.scene.static_names
+                name = names[link] if 0 <= link < len(names) else "static"
+            c = Contact(now, "arm", name, pose)
+            core.contacts.append(c)
+            self._seen_contacts += 1
+            self._contact(c)
+        self._arm_touching = frozenset(touching)
+
+    def sample(self) -> None:
+        """One tick's record at the core's clock time, and the contacts since the last."""
+        core = self._core
+        now = core.clock.now()
+        pose = core.true_pose
+        self._arm_contacts(now, pose)
+        for c in core.contacts[self._seen_contacts:]:
+            self._contact(c)
+        self._seen_contacts = len(core.contacts)
+        d, name = self._static.distance(pose.x, pose.y)
+        clearance = d - self._radius
+        if clearance < self.min_clearance[0]:
+            self.min_clearance = (clearance, name)
+        rec: dict[str, Any] = {"t": round(now, 4), "pose": [round(pose.x, 4), round(pose.y, 4), round(pose.theta, 4)],
+                               "clearance": round(clearance, 4), "nearest": name}
+        people = core.people
+        if people is not None and len(people):
+            gaps = people.gaps(pose.x, pose.y, self._radius)
+            for n, g in zip(people.names, gaps):
+                self.min_gap[n] = min(self.min_gap[n], float(g))
+            rec["people"] = [[round(float(x), 4), round(float(y), 4)] for x, y in people.positions()]
+            rec["gaps"] = [round(float(g), 4) for g in gaps]
+        self._write("truth", **rec)
+        self.ticks += 1
+
+    def close(self) -> None:
+        """Write the summary and close the file."""
+        if self._out.closed:
+            return
+        c, where = self.min_clearance
+        self._write("truth_end", ticks=self.ticks, min_clearance=round(c, 4) if math.isfinite(c) else None,
+                    nearest=where, min_gap={n: round(g, 4) if math.isfinite(g) else None for n, g in self.min_gap.items()},
+                    contacts=self.contacts, contact_bodies=self.contact_bodies)
+        self._out.close()
+
+
+def open_truth_log(path: Path, core: SimCore, world: World, seed: int | None, footprint_radius: float,
+                   z_range: tuple[float, float], arm_links: frozenset[int]) -> TruthLog:
+    """Create (or replace) the sidecar at ``path`` (its folder is made) and write its
+    first record. ``z_range`` [m]: the height range of the base's bumper bodies;
+    ``arm_links``: the robot's arm and gripper link indices. OSError when it cannot be
+    written."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    stream = path.open("w", buffering=1, encoding="utf-8")  # line-buffered: a crash keeps what was measured
+    log.info("ground truth of this run: %s", path)
+    return TruthLog(stream, core, world, seed, footprint_radius, z_range, arm_links)
