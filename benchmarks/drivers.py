@@ -31,11 +31,14 @@ from __future__ import annotations
 
 import argparse
 import platform
+import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 import dynamixel_sdk as sdk
 
@@ -318,7 +321,118 @@ def bench_robotiq(requests: int = 200) -> list[str]:
     return [f"robotiq_status_round_trip_ms: {statistics.median(times) * 1e3:.2f} (median of {requests})"]
 
 
-OTHER_SECTIONS: list[Callable[[], list[str]]] = [bench_kobuki, bench_robotiq]
+def _refusing_host() -> str:
+    """A loopback address on which nothing listens on port 30004 (a connect is refused)."""
+    for last in range(100, 150):
+        host = f"127.0.0.{last}"
+        with socket.socket() as probe:
+            if probe.connect_ex((host, 30004)) != 0:
+                return host
+    raise RuntimeError("every probed loopback address listens on port 30004")
+
+
+_UR_MISSION = "mission: ur_bringup\ntree:\n  skill: report\n  params: {message: connected}\n"
+
+
+def _ur_open_failure(host: str, connect_timeout: float) -> float:
+    """Wall seconds from ``URArm.open()`` to its one-line URConnectionError."""
+    from mmexec.drivers.ur.arm import URArm, URArmConfig, URConnectionError
+
+    arm = URArm(URArmConfig(host=host, connect_timeout=connect_timeout))
+    t0 = time.perf_counter()
+    try:
+        arm.open()
+    except URConnectionError as e:
+        took = time.perf_counter() - t0
+        if "\n" in str(e):
+            raise RuntimeError(f"the failure is not one line: {e!r}") from e
+        return took
+    finally:
+        arm.close()
+    raise RuntimeError(f"URArm.open() to {host} did not fail")
+
+
+def _ur_run_failure(host: str, connect_timeout: float) -> float:
+    """Wall seconds from starting ``mmexec run`` (a config whose arm is the silent host) to
+    its exit with status 2 and one line on stderr."""
+    exe = Path(sys.executable).with_name("mmexec")
+    with tempfile.TemporaryDirectory() as tmp:
+        mission, config = Path(tmp, "mission.yaml"), Path(tmp, "ur.yaml")
+        mission.write_text(_UR_MISSION)
+        config.write_text(f"backend: robot\nrate_hz: 20\nrobot:\n  arm: {{kind: ur, host: {host}, "
+                          f"connect_timeout: {connect_timeout}}}\nprofile: {{}}\n")
+        t0 = time.perf_counter()
+        proc = subprocess.run([str(exe), "run", str(mission), "--config", str(config), "--log", str(Path(tmp, "l.jsonl"))],
+                              check=False, capture_output=True, text=True, timeout=connect_timeout + 60.0)
+        took = time.perf_counter() - t0
+    lines = proc.stderr.strip().splitlines()
+    if proc.returncode != 2 or len(lines) != 1:
+        raise RuntimeError(f"mmexec run: exit {proc.returncode}, stderr {proc.stderr!r}")
+    return took
+
+
+def bench_ur_bringup(runs: int = 3, timeouts: Sequence[float] = (1.0, 2.0)) -> list[str]:
+    """UR bring-up against a controller that never answers (issue 9: "bring-up fails in one
+    line within connect_timeout + 1 s"): wall time from the start to the one-line failure,
+    against ``connect_timeout`` T, median and max of ``runs`` per T.
+
+    * ``ur_open_fail_s``: ``URArm.open()`` in this process until it raises (the driver's
+      bring-up alone), against the RTDE stub: ``silent`` (it accepts TCP and never
+      answers: the pre-flight check's deadline) and ``stalls`` (it answers the pre-flight,
+      then never answers ur_rtde: the host process's deadline);
+    * ``ur_run_fail_s``: a whole ``mmexec run`` against the silent stub (interpreter
+      start, imports, config, bring-up, exit) until it exits 2 with one line on stderr;
+      ``refused``: the same against a host where nothing listens (an immediate failure),
+      i.e. what the command costs around the bring-up.
+
+    The last two lines: ``ur_bringup_overshoot_s``, the worst time past T of the
+    bring-up (every ``ur_open_fail_s`` run; the issue's bound, 1 s), and
+    ``ur_run_overshoot_s``, the same for the whole command, start-up included.
+    """
+    from mmexec.drivers.ur.rtde_stub import RTDEStub, StubError
+
+    lines: list[str] = []
+    worst = {"open": 0.0, "run": 0.0}
+
+    def report(name: str, t: float, took: list[float]) -> None:
+        kind = name.split("_")[1]
+        worst[kind] = max(worst[kind], max(took) - t)
+        lines.append(f"{name}: T {t:.1f} s: median {statistics.median(took):.3f} s, max {max(took):.3f} s "
+                     f"(+{max(took) - t:.3f} s over T, {len(took)} runs)")
+
+    for last in range(150, 200):  # a loopback address whose port 30004 is free
+        try:
+            stub = RTDEStub(f"127.0.0.{last}").start()
+            break
+        except StubError as e:
+            if "Address already in use" not in str(e):
+                raise
+    else:
+        raise RuntimeError("no free loopback address for the RTDE stub on port 30004")
+    try:
+        stub.silence(0)  # every connection accepted and never answered
+        for t in timeouts:
+            report("ur_open_fail_s silent", t, [_ur_open_failure(stub.host, t) for _ in range(runs)])
+        for t in timeouts:
+            took = []
+            for _ in range(runs):
+                stub.silence(after=1)  # the pre-flight is served, ur_rtde's connection is not
+                took.append(_ur_open_failure(stub.host, t))
+            report("ur_open_fail_s stalls", t, took)
+        stub.silence(0)
+        for t in timeouts:
+            report("ur_run_fail_s silent", t, [_ur_run_failure(stub.host, t) for _ in range(runs)])
+        refused = [_ur_run_failure(_refusing_host(), 1.0) for _ in range(runs)]
+        lines.append(f"ur_run_fail_s refused: median {statistics.median(refused):.3f} s, max {max(refused):.3f} s "
+                     f"({runs} runs)")
+    finally:
+        stub.stop()
+    lines.append(f"ur_bringup_overshoot_s: {worst['open']:.3f} (limit 1.0)")
+    lines.append(f"ur_run_overshoot_s: {worst['run']:.3f} (command start-up included)")
+    return lines
+
+
+OTHER_SECTIONS: list[Callable[[], list[str]]] = [bench_kobuki, bench_robotiq, bench_ur_bringup]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -60,6 +60,7 @@ from mmexec.drivers.interfaces import (
 
 __all__ = [
     "DEVICE_KINDS",
+    "BringUpInterrupted",
     "DeviceUnavailable",
     "RealRobot",
     "SinceStartClock",
@@ -71,6 +72,17 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+
+
+class BringUpInterrupted(KeyboardInterrupt):
+    """A halting signal (SIGINT, SIGTERM or SIGHUP, number ``signum``) ended the device
+    bring-up; :func:`build` closed what it had opened. A KeyboardInterrupt, so every wait
+    that gives up on Ctrl-C (:meth:`URArm.open <mmexec.drivers.ur.arm.URArm.open>`)
+    gives up on any of the three."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(f"interrupted by {signal.Signals(signum).name} during device bring-up")
+        self.signum = signum
 
 
 class DeviceUnavailable(InputError):
@@ -376,6 +388,9 @@ def _ur(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
         except mod.URConnectionError as e:
             arm.close()
             raise _connect_error(path, section.mark, str(e)) from e
+        except BaseException:  # BringUpInterrupted, also before open() could close it itself
+            arm.close()
+            raise
         ctx.robot.add_closer(where, arm.close)
         return arm
 
@@ -556,7 +571,7 @@ def build(
     for step in ctx.prepare:
         step()
     try:
-        with _sigint_aborts():
+        with _halt_signals_abort():
             for slot, label, _mark, connect in plans:
                 log.info("robot: bringing up %s: %s", slot, label)
                 setattr(robot, slot, connect())
@@ -566,30 +581,47 @@ def build(
     return robot
 
 
+#: the signals that end a device bring-up at once (the runner's halting signals)
+_BRING_UP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
 @contextlib.contextmanager
-def _sigint_aborts() -> Iterator[None]:
-    """While devices come up, Ctrl-C (SIGINT) ends the bring-up with KeyboardInterrupt
-    (``build`` closes what was opened), after the SIGINT handler installed before has run.
-    The runner's handler only records the signal for a tree that does not exist yet, so a
-    device waiting out its connect deadline (a UR controller that never answers: up to
-    ``connect_timeout``) would otherwise keep Ctrl-C waiting. Main thread only; an
-    ignored or default SIGINT is left alone."""
-    previous = signal.getsignal(signal.SIGINT)
-    if threading.current_thread() is not threading.main_thread() or not callable(previous):
+def _halt_signals_abort() -> Iterator[None]:
+    """While devices come up, SIGINT, SIGTERM and SIGHUP end the bring-up at once with
+    :class:`BringUpInterrupted` (``build`` closes what was opened), after the handler
+    installed before has run (the runner's records the signal, which fixes the exit code
+    at 128 + its number). That handler only records the signal for a tree that does not
+    exist yet, so a device waiting out its connect deadline (a UR controller that never
+    answers: up to ``connect_timeout``) would otherwise keep the signal waiting. Only the
+    first signal raises: a second one while what was opened is closed is passed on to the
+    previous handler alone, so the closing completes. Main thread only; a signal whose
+    handler is not a Python function (ignored, e.g. SIGHUP under ``nohup``, or the
+    default) is left alone."""
+    if threading.current_thread() is not threading.main_thread():
         yield
         return
+    previous = {sig: signal.getsignal(sig) for sig in _BRING_UP_SIGNALS}
+    fired: list[int] = []
 
-    chained = previous  # narrowed to the handler function
+    def chain(handler: Callable[[int, Any], Any]) -> Callable[[int, Any], None]:
+        def on_signal(signum: int, frame: Any) -> None:
+            handler(signum, frame)
+            if not fired:
+                fired.append(signum)
+                raise BringUpInterrupted(signum)
 
-    def on_sigint(signum: int, frame: Any) -> None:
-        chained(signum, frame)
-        raise KeyboardInterrupt
+        return on_signal
 
-    signal.signal(signal.SIGINT, on_sigint)
+    installed = []
+    for sig, handler in previous.items():
+        if callable(handler):
+            signal.signal(sig, chain(handler))
+            installed.append(sig)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig in installed:
+            signal.signal(sig, previous[sig])
 
 
 def check(section: YDict | None, *, profile: Mapping[str, Any] | None = None) -> list[str]:

@@ -16,6 +16,10 @@ cancelled, the hardware left safe), bounded by :attr:`RunOptions.halt_wall_limit
 seconds of wall time, after which it calls ``robot.safe_stop()``. A second signal skips
 the wait. Then it closes the robot (which stops it again), writes ``request_end`` and
 ``run_end`` and returns 128 + the signal number: 130 (SIGINT), 143 (SIGTERM), 129 (SIGHUP).
+A signal while the robot's devices come up ends the bring-up at once (the backend
+builder closes what it had opened; ``mmexec.drivers.robot.BringUpInterrupted``): one line
+``mmexec: interrupted`` (naming SIGTERM / SIGHUP) on ``err``, ``run_end`` with outcome
+``interrupted`` and the signal, and the same exit code.
 On a wall clock the wait between ticks (``robot.spin``) is cut short by the signal, so
 a slow ``rate_hz`` does not delay the halt, and while a signalled tree stops the runner
 ticks at least every :data:`HALT_TICK` seconds.
@@ -571,6 +575,16 @@ class Runner:
             self._print_summary(n, ok, failed, outcome)
             return exit_code
         except BaseException as e:
+            if isinstance(e, KeyboardInterrupt) and self.robot is None and self.signal is not None:
+                # a halting signal ended the device bring-up (the builder closed what it
+                # had opened): an interrupted run, 128 + the signal, like one during ticks
+                exit_code = 128 + self.signal
+                name = _signal_name(self.signal)
+                if self.log is not None and not self.log.closed:
+                    self.log.write("run_end", outcome="interrupted", signal=name, served=self._served,
+                                   exit_code=exit_code)
+                self._say("mmexec: interrupted" + ("" if self.signal == signal.SIGINT else f" ({name})"), self.err)
+                return exit_code
             if self.log is not None and not self.log.closed:
                 # the exit code the command will return for this exception (cli.main)
                 code = (EXIT_INPUT if isinstance(e, InputError)

@@ -25,6 +25,15 @@ exactly); :meth:`URArm.move_to` sends one asynchronous ``moveJ``. Cancelling dec
 (``servoStop`` / ``stopJ`` at ``stop_deceleration``) and the goal becomes CANCELLED once
 every joint speed is below ``rest_speed``.
 
+Lost link: at connect the driver arms the controller's RTDE watchdog
+(``setWatchdog(watchdog_frequency)``; ur_rtde's script then stops the program, and the
+arm, when no command package arrives for ``1 / watchdog_frequency`` s) and feeds it in
+every worker cycle (``kickWatchdog()`` when the cycle sends no other command). So the arm
+stops within that period of the last command that got through, however the link broke:
+closed, stalled, the host process killed, or this process gone. A cancelled motion must
+come to rest within :meth:`URArmConfig.stop_deadline`, derived from the model's joint
+speed limits and ``stop_deceleration`` unless ``stop_timeout`` is set.
+
 Faults (checked every worker cycle, each fails the running goal with this reason prefix):
 ``connection lost`` (``isConnected()`` False, a call raised, or the controller timestamp
 did not advance for ``stale_timeout`` clock seconds), ``protective stop``, ``emergency
@@ -73,6 +82,8 @@ __all__ = [
     "RTDE_PORT",
     "RUNTIME_STATES",
     "SAFETY_MODES",
+    "STOP_MARGIN",
+    "WATCHDOG_FREQUENCY_RANGE",
     "URArm",
     "URArmConfig",
     "URConnectionError",
@@ -105,6 +116,13 @@ DISCONNECT_ALLOWANCE = 1.0
 _REASON_GRACE = 0.25
 #: ur_rtde error texts that concern another port of the controller than RTDE's
 _VENDOR_PORTS = (("dashboard", 29999), ("script", 30003))
+#: [Hz] allowed ``watchdog_frequency``: at 1 Hz an arm on a lost link runs on for up to 1 s;
+#: above 50 Hz (20 ms) a worker cycle delayed by the machine (a GC pause, a loaded core)
+#: would stop the controller's program on a healthy link
+WATCHDOG_FREQUENCY_RANGE = (1.0, 50.0)
+#: the derived stop deadline is this many times the braking time of the model's fastest
+#: joint from its speed limit, plus ``command_timeout`` for the stop command to arrive
+STOP_MARGIN = 1.25
 
 
 class URConnectionError(CapabilityError):
@@ -124,6 +142,14 @@ class URArmConfig:
 
     ``stale_timeout`` is measured on the injected clock; ``connect_timeout`` and
     ``command_timeout`` are link deadlines on ``time.monotonic()``.
+
+    ``watchdog_frequency`` [Hz] arms the controller's RTDE watchdog at bring-up
+    (``setWatchdog``): the control script is stopped, and the arm with it, when no command
+    from the driver arrives for ``1 / watchdog_frequency`` s; the worker kicks it every
+    cycle, so it must be at most ``frequency / 2`` and within
+    :data:`WATCHDOG_FREQUENCY_RANGE`. ``stop_timeout`` [s]: how long a cancelled motion
+    may take to come to rest; unset, it is derived from the model
+    (:meth:`stop_deadline`); set, it must cover the braking time (:meth:`braking_time`).
     """
 
     host: str
@@ -135,7 +161,8 @@ class URArmConfig:
     move_acceleration: float = 1.4
     acceleration_limit: float = math.inf
     stop_deceleration: float = 2.0
-    stop_timeout: float = 3.0
+    stop_timeout: float | None = None
+    watchdog_frequency: float = 10.0
     settle_timeout: float = 1.0
     goal_tolerance: float = 0.01
     rest_speed: float = 0.01
@@ -147,11 +174,47 @@ class URArmConfig:
         if self.model not in urmodel.MODELS:
             raise ValueError(f"unknown UR model {self.model!r} (known: {', '.join(urmodel.MODELS)})")
         for name in ("frequency", "connect_timeout", "command_timeout", "stale_timeout", "stop_deceleration",
-                     "stop_timeout", "settle_timeout", "goal_tolerance", "rest_speed", "move_acceleration"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"URArmConfig.{name} must be > 0, got {getattr(self, name)}")
+                     "settle_timeout", "goal_tolerance", "rest_speed", "move_acceleration", "watchdog_frequency"):
+            value = getattr(self, name)
+            if not (value > 0 and math.isfinite(value)):
+                raise ValueError(f"URArmConfig.{name} must be > 0 and finite, got {value}")
+        lo, hi = WATCHDOG_FREQUENCY_RANGE
+        if not lo <= self.watchdog_frequency <= hi:
+            raise ValueError(f"URArmConfig.watchdog_frequency must be within [{lo:g}, {hi:g}] Hz, "
+                             f"got {self.watchdog_frequency:g}")
+        if self.watchdog_frequency > self.frequency / 2:
+            raise ValueError(f"URArmConfig.watchdog_frequency {self.watchdog_frequency:g} Hz needs frequency >= "
+                             f"{2 * self.watchdog_frequency:g} Hz (the watchdog is kicked once per cycle, at least "
+                             f"twice per watchdog period), got {self.frequency:g} Hz")
+        if self.stop_timeout is not None:
+            if not (self.stop_timeout > 0 and math.isfinite(self.stop_timeout)):
+                raise ValueError(f"URArmConfig.stop_timeout must be > 0 and finite, got {self.stop_timeout}")
+            if self.stop_timeout < self.braking_time():
+                raise ValueError(
+                    f"URArmConfig.stop_timeout {self.stop_timeout:g} s is shorter than braking the {self.model}'s "
+                    f"fastest joint from its speed limit ({self._top_speed():.3f} rad/s at stop_deceleration "
+                    f"{self.stop_deceleration:g} rad/s^2: {self.braking_time():.2f} s); raise it, or leave it unset "
+                    f"to derive it ({self._derived_stop_deadline():.2f} s)")
         if len(self.mount) != 16:
             raise ValueError("URArmConfig.mount must hold a row-major 4x4 transform (16 values)")
+
+    def _top_speed(self) -> float:
+        return max(lim.velocity for lim in urmodel.joint_limits(self.model))
+
+    def braking_time(self) -> float:
+        """[s] braking the model's fastest joint from its speed limit at
+        ``stop_deceleration`` (UR5e: pi / 2 = 1.57 s; UR3e wrists 2 pi rad/s: 3.14 s)."""
+        return self._top_speed() / self.stop_deceleration
+
+    def _derived_stop_deadline(self) -> float:
+        return STOP_MARGIN * self.braking_time() + self.command_timeout
+
+    def stop_deadline(self) -> float:
+        """[s] how long after a stop command a cancelled motion may take to come to rest
+        before its goal fails: ``stop_timeout`` if set, otherwise :data:`STOP_MARGIN`
+        times :meth:`braking_time` plus ``command_timeout`` (defaults: UR5e 2.46 s, UR3e
+        4.43 s)."""
+        return self.stop_timeout if self.stop_timeout is not None else self._derived_stop_deadline()
 
 
 @dataclass(frozen=True)
@@ -212,6 +275,7 @@ class URArm(Arm):
         self._control_factory = control_factory or self._default_control
         self._receive_factory = receive_factory or self._default_receive
         self._limits = urmodel.joint_limits(config.model, config.acceleration_limit)
+        self._stop_deadline = config.stop_deadline()
         self._mount = np.array(config.mount, dtype=float).reshape(4, 4)
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -240,6 +304,7 @@ class URArm(Arm):
         self._motion: _Motion | None = None
         self._last_ts: float | None = None
         self._last_fresh = 0.0
+        self._fed = False  # a command went to the controller in this worker cycle
 
     # ------------------------------------------------------------------ default factories
     def _default_receive(self, host: str, frequency: float) -> Any:
@@ -565,6 +630,7 @@ class URArm(Arm):
         period = 1.0 / self.config.frequency
         while True:
             t_cycle = time.monotonic()
+            self._fed = False
             with self._lock:
                 cmds, self._commands = self._commands, []
                 self._wake.clear()
@@ -603,7 +669,7 @@ class URArm(Arm):
             if m is not None and m.goal is cmd[1] and m.phase != "stopping":
                 self._begin_stop(m)
         elif kind == "stop" and self._motion is None and self._ctl is not None and not self._link_lost:
-            self._call("stopJ", self._ctl.stopJ, self.config.stop_deceleration, True)
+            self._command("stopJ", self.config.stop_deceleration, True)
 
     def _do_connect(self, goal: Goal, deadline: float) -> None:
         self._disconnect_all()
@@ -633,6 +699,7 @@ class URArm(Arm):
         try:
             rcv = self._connect_step(goal, "RTDEReceiveInterface()", self._receive_factory)
             ctl = self._connect_step(goal, "RTDEControlInterface()", self._control_factory)
+            self._arm_watchdog(goal, rcv, ctl)
         except (RuntimeError, URConnectionError, _Stalled) as e:
             with self._lock:
                 self._stalled = ""
@@ -663,6 +730,22 @@ class URArm(Arm):
         log.info("UR %s: connected", host)
         goal.succeed()
         self._unwatch(goal)
+
+    def _arm_watchdog(self, goal: Goal, rcv: Any, ctl: Any) -> None:
+        """``setWatchdog(watchdog_frequency)`` on the new control interface (ur_rtde's
+        script then calls ``rtde_set_watchdog("input_int_register_0", f, "stop")``): from
+        now on the controller stops its program, and the arm, when no command of ours
+        arrives for ``1 / f`` s; :meth:`_cycle` kicks it. A controller that refuses fails
+        the connect, naming what its state shows."""
+        if goal.done():
+            raise _Stalled(goal.reason or "gave up")
+        wf = self.config.watchdog_frequency
+        if self._call("setWatchdog", ctl.setWatchdog, wf):
+            return
+        fault = running_fault(int(rcv.getRobotMode()), int(rcv.getSafetyMode()), int(rcv.getSafetyStatusBits()),
+                              int(rcv.getRuntimeState()))
+        detail = f"cannot connect: controller refused setWatchdog({wf:g} Hz): {fault or 'no fault in its state'}"
+        raise URConnectionError(detail, detail)
 
     def _read(self) -> str:
         """Read the receive interface into the cache; return the fault reason ("" if fine)."""
@@ -699,10 +782,20 @@ class URArm(Arm):
 
     def _cycle(self) -> None:
         fault = self._read()
-        m = self._motion
         if fault.startswith("connection lost"):
             self._lose_link(fault)
             return
+        self._step(fault)
+        if not self._fed and self._ctl is not None:
+            # Feed the controller's RTDE watchdog (armed at connect) in every cycle that sent
+            # no command (each command package feeds it, and a second package in the same
+            # controller cycle could overwrite the first's registers). The result is not
+            # judged: ur_rtde returns False only when it sends nothing (program stopped,
+            # protective or emergency stop), states this cycle's read reports as the fault.
+            self._call("kickWatchdog", self._ctl.kickWatchdog)
+
+    def _step(self, fault: str) -> None:
+        m = self._motion
         if m is None:
             return
         if fault:
@@ -711,6 +804,13 @@ class URArm(Arm):
                 self._safe_stop_call(m)
             return
         self._advance(m)
+
+    def _command(self, name: str, *args: Any) -> Any:
+        """Call the control interface's ``name(*args)`` (worker thread). Every command
+        package updates the register the controller's watchdog watches: this cycle then
+        needs no kick."""
+        self._fed = True
+        return self._call(name, getattr(self._ctl, name), *args)
 
     def _start_motion(self, m: _Motion) -> None:
         if m.goal.done():
@@ -723,7 +823,7 @@ class URArm(Arm):
         m.t0 = m.t_phase = self.clock.now()
         if m.kind == "move":
             acc = min(self.config.move_acceleration, self.config.acceleration_limit)
-            ok = self._call("moveJ", self._ctl.moveJ, [float(x) for x in m.target], m.speed, acc, True)
+            ok = self._command("moveJ", [float(x) for x in m.target], m.speed, acc, True)
             if not ok:
                 self._refused(m, "moveJ")
                 return
@@ -738,10 +838,10 @@ class URArm(Arm):
             qd = np.array(self._state.velocities)
         at_rest = float(np.max(np.abs(qd))) < cfg.rest_speed
         if m.phase == "stopping":
-            if at_rest and (m.kind == "servo" or self._call("isSteady", self._ctl.isSteady)):
+            if at_rest and (m.kind == "servo" or self._command("isSteady")):
                 self._finish(m, cancelled=True)
-            elif now - m.t_phase > cfg.stop_timeout:
-                self._finish(m, fail=f"arm did not come to rest within {cfg.stop_timeout:.1f} s after stopping")
+            elif now - m.t_phase > self._stop_deadline:
+                self._finish(m, fail=f"arm did not come to rest within {self._stop_deadline:.2f} s after stopping")
             return
         t = now - m.t0
         err = np.abs(q - m.target)
@@ -754,10 +854,10 @@ class URArm(Arm):
                 q_cmd = np.clip(q_cmd, m.last_cmd - vmax, m.last_cmd + vmax)
             m.last_cmd, m.t_phase = q_cmd, now
             if reached and t >= m.times[-1]:
-                self._call("servoStop", self._ctl.servoStop, cfg.stop_deceleration)
+                self._command("servoStop", cfg.stop_deceleration)
                 self._finish(m)
                 return
-            ok = self._call("servoJ", self._ctl.servoJ, [float(x) for x in q_cmd], 0.0, 0.0,
+            ok = self._command("servoJ", [float(x) for x in q_cmd], 0.0, 0.0,
                             1.0 / cfg.frequency, cfg.servo_lookahead, cfg.servo_gain)
             if not ok:
                 self._refused(m, "servoJ")
@@ -777,9 +877,9 @@ class URArm(Arm):
 
     def _safe_stop_call(self, m: _Motion) -> None:
         if m.kind == "servo":
-            self._call("servoStop", self._ctl.servoStop, self.config.stop_deceleration)
+            self._command("servoStop", self.config.stop_deceleration)
         else:
-            self._call("stopJ", self._ctl.stopJ, self.config.stop_deceleration, True)
+            self._command("stopJ", self.config.stop_deceleration, True)
 
     def _finish(self, m: _Motion, *, fail: str = "", cancelled: bool = False) -> None:
         if fail:

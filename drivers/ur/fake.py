@@ -15,10 +15,24 @@ Method names, argument order and return conventions follow ur_rtde 1.6.5
 constructors and ``reconnect()`` raise ``RuntimeError("Error: Could not connect to: HOST at
 30004, verify the IP")`` when connections are refused; getters keep returning the last
 values after a connection loss; ``getInverseKinematics`` raises RuntimeError when no
-solution exists. Simplifications (documented, deliberate): moves are trapezoidal
-straight lines in joint space (``moveL`` too, through IK of its target), a protective
-stop, e-stop, stopped program or dropped connection halts the arm at once, and the joint
-speed is capped at the model's limit.
+solution exists.
+
+The control script, as ur_rtde uploads it: a lost connection does not stop the arm (the
+script keeps servoing to the last ``servoJ`` target, a ``moveJ`` runs to its end);
+``setWatchdog(f)`` arms the controller's RTDE watchdog, URScript
+``rtde_set_watchdog("input_int_register_0", f, "stop")``: every command package ur_rtde
+sends (any control-interface command, including one the script refuses, and
+``kickWatchdog()``) updates that register, and when no update arrives for ``1 / f``
+seconds of controller (clock) time the program is stopped (runtime state 1, the arm
+stops, the watchdog is removed with the program). Each such stop is recorded in
+:attr:`FakeURController.watchdog_stops`. A new control interface uploads and starts the
+script again (runtime state 2, no watchdog), or raises ur_rtde's ``Failed to start
+control script`` while a safety stop or power-off prevents it.
+
+Simplifications (documented, deliberate): moves are trapezoidal straight lines in joint
+space (``moveL`` too, through IK of its target), a protective stop, e-stop or stopped
+program (the watchdog's included) halts the arm at once (a real arm brakes), and the
+joint speed is capped at the model's limit.
 """
 
 from __future__ import annotations
@@ -37,9 +51,26 @@ from mmexec.drivers.interfaces import Clock
 from mmexec.drivers.ur import model as urmodel
 from mmexec.drivers.ur import states
 
-__all__ = ["FakeRTDEControl", "FakeRTDEReceive", "FakeURController"]
+__all__ = ["FakeRTDEControl", "FakeRTDEReceive", "FakeURController", "WatchdogStop"]
 
 log = logging.getLogger(__name__)
+
+#: [s, real time] how long ur_rtde waits for a command's 'done' before it gives up
+#: (UR_EXECUTION_TIMEOUT in ur_rtde's source): the wait of a command that never arrived
+_EXECUTION_TIMEOUT = 300.0
+
+
+@dataclass(frozen=True)
+class WatchdogStop:
+    """The controller's RTDE watchdog stopped the program: at clock time ``t``, ``period``
+    [s] after the last command package arrived (``last_input``); the arm stopped at ``q``
+    [rad], moving at ``qd`` [rad/s] just before."""
+
+    t: float
+    last_input: float
+    period: float
+    q: tuple[float, ...]
+    qd: tuple[float, ...]
 
 
 @dataclass
@@ -92,8 +123,8 @@ class FakeURController:
 
     ``connect_delay`` [s, real time]: how long each constructor blocks (a slow network).
     ``command_delay`` [s, real time]: how long every control command blocks (a stalled
-    link), for deadline tests. ``servo_timeout`` [s, clock time]: servoJ/speedJ watchdog;
-    streaming that stops for longer halts the arm.
+    link), for deadline tests. The RTDE watchdog runs on the clock (controller time): see
+    the module doc and :attr:`watchdog_stops`.
     """
 
     def __init__(
@@ -103,7 +134,6 @@ class FakeURController:
         model: str = "ur5e",
         q0: Sequence[float] = (0.0, -1.5708, 1.5708, -1.5708, -1.5708, 0.0),
         connect_delay: float = 0.0,
-        servo_timeout: float = 0.1,
         controller_version: tuple[int, int, int, int] = (5, 15, 0, 12345),
     ) -> None:
         self.clock = clock
@@ -111,7 +141,6 @@ class FakeURController:
         self.limits = urmodel.joint_limits(model)
         self.connect_delay = connect_delay
         self.command_delay = 0.0
-        self.servo_timeout = servo_timeout
         self.controller_version = controller_version
         self._lock = threading.RLock()
         self._release = threading.Event()
@@ -124,7 +153,13 @@ class FakeURController:
         self._queue: list[tuple[np.ndarray, float, float]] = []
         self._servo_target = self._q.copy()
         self._servo_speed = np.zeros(6)
-        self._last_stream = 0.0
+        # the RTDE watchdog of the running program: period [s] (None: not armed) and the
+        # clock time of the last command package that reached the controller
+        self._watchdog: float | None = None
+        self._last_input = clock.now()
+        self._watchdog_stops: list[WatchdogStop] = []
+        #: commands sent by the driver are lost on the way (see :meth:`drop_commands`)
+        self.commands_lost = False
         self.robot_mode = 7
         self.safety_mode = 1
         self.safety_status_bits = 1
@@ -134,7 +169,6 @@ class FakeURController:
         self.ik_fails = False
         self.safety_refuses = False
         self.not_found: set[str] = set()
-        self.watchdog_expired = 0
         self._session = 0
         self._snapshot: dict[str, Any] | None = None
         self.connections = 0
@@ -154,10 +188,11 @@ class FakeURController:
             self.safety_mode, self.safety_status_bits, self.robot_mode = 7, (1 << 6) | (1 << 7), 3
 
     def stop_program(self) -> None:
-        """Runtime state 1 (stopped): the control script is gone; the arm halts."""
+        """Runtime state 1 (stopped): the control script is gone (its RTDE watchdog with
+        it); the arm halts."""
         with self._lock:
             self._halt()
-            self.runtime_state = 1
+            self.runtime_state, self._watchdog = 1, None
 
     def set_state(self, *, robot_mode: int | None = None, safety_mode: int | None = None,
                   runtime_state: int | None = None) -> None:
@@ -173,6 +208,8 @@ class FakeURController:
             states.robot_status_bits(rm, rt)  # validates the robot mode and runtime state
             if states.running_fault(rm, sm, bits, rt):
                 self._halt()
+            if rt != states.RUNTIME_PLAYING:  # the program ended: its watchdog goes with it
+                self._watchdog = None
             self.robot_mode, self.safety_mode, self.runtime_state, self.safety_status_bits = rm, sm, rt, bits
 
     def power_off(self) -> None:
@@ -186,11 +223,22 @@ class FakeURController:
             self.safety_mode, self.safety_status_bits, self.robot_mode, self.runtime_state = 1, 1, 7, 2
 
     def drop_connections(self) -> None:
-        """Every open interface loses its connection (isConnected False, getters go stale)."""
+        """Every open interface loses its connection (isConnected False, getters go stale).
+        The controller's program runs on with its last command (a servo target, a moveJ)
+        until its RTDE watchdog, if armed, stops it."""
         with self._lock:
-            self._halt()
             self._snapshot = self._read()
             self._session += 1
+
+    def drop_commands(self, on: bool = True) -> None:
+        """While on, nothing the driver sends reaches the controller (a link cut one way;
+        state data still arrives): real-time commands (servoJ, speedJ, kickWatchdog)
+        return True without effect, the others wait for a 'done' that never comes (real
+        time, up to ur_rtde's 300 s; :meth:`release_blocked_calls` ends the wait) and
+        return False. The RTDE watchdog, if armed, then stops the program."""
+        with self._lock:
+            self._advance()
+            self.commands_lost = on
 
     def refuse_connections(self, on: bool = True) -> None:
         """Constructors and reconnect() raise 'Could not connect' while on."""
@@ -218,6 +266,13 @@ class FakeURController:
 
     # ------------------------------------------------------------------ model
     @property
+    def watchdog_stops(self) -> list[WatchdogStop]:
+        """Every stop of the program by its RTDE watchdog up to the clock's now, oldest first."""
+        with self._lock:
+            self._advance()
+            return list(self._watchdog_stops)
+
+    @property
     def faulted(self) -> bool:
         return self.safety_mode != 1 or self.runtime_state != 2 or self.robot_mode != 7
 
@@ -227,22 +282,31 @@ class FakeURController:
         self._qd = np.zeros(6)
 
     def _advance(self) -> None:
-        """Bring q, qd up to the clock's now (lazy integration). Call under the lock."""
+        """Bring q, qd up to the clock's now (lazy integration), stopping the program at
+        the moment its RTDE watchdog expired if it did meanwhile. Call under the lock."""
         now = self.clock.now()
+        if self._watchdog is not None and self.runtime_state == states.RUNTIME_PLAYING:
+            expiry = self._last_input + self._watchdog
+            if now > expiry:
+                self._advance_to(max(expiry, self._t_last))
+                self._watchdog_stop(expiry)
+        self._advance_to(now)
+
+    def _advance_to(self, t: float) -> None:
+        """Integrate the motion from the last update to clock time ``t``."""
         if self._mode in ("move", "stop"):
             assert self._profile is not None
-            self._q, self._qd = self._profile.at(now)
-            if now >= self._profile.t0 + self._profile.duration() - 1e-9:
+            self._q, self._qd = self._profile.at(t)
+            if t >= self._profile.t0 + self._profile.duration() - 1e-9:
                 self._qd = np.zeros(6)
                 if self._queue and self._mode == "move":
                     q1, v, a = self._queue.pop(0)
                     self._start_profile(q1, v, a, self._profile.t0 + self._profile.duration())
-                    self._advance()
+                    self._advance_to(t)
                     return
                 self._mode, self._profile = "idle", None
-        elif self._mode in ("servo", "speed"):
-            end = min(now, self._last_stream + self.servo_timeout)
-            dt = end - self._t_last
+        elif self._mode in ("servo", "speed"):  # the script streams the last target / speed on
+            dt = t - self._t_last
             if dt > 0:
                 vmax = np.array([lim.velocity for lim in self.limits])
                 if self._mode == "servo":
@@ -251,11 +315,36 @@ class FakeURController:
                     step = np.clip(self._servo_speed, -vmax, vmax) * dt
                 self._q = self._q + step
                 self._qd = step / dt
-            if now > self._last_stream + self.servo_timeout:
-                self.watchdog_expired += 1
-                log.info("fake UR: servo/speed watchdog expired, arm stopped")
-                self._mode, self._qd = "idle", np.zeros(6)
-        self._t_last = now
+        self._t_last = max(self._t_last, t)
+
+    def _watchdog_stop(self, t: float) -> None:
+        """The RTDE watchdog expired at clock time ``t``: the program stops, the arm halts
+        (fake simplification: at once), the watchdog is removed with the program."""
+        assert self._watchdog is not None
+        self._watchdog_stops.append(WatchdogStop(t, self._last_input, self._watchdog,
+                                                tuple(float(x) for x in self._q), tuple(float(x) for x in self._qd)))
+        log.info("fake UR: no command for %.3f s (RTDE watchdog): program stopped", self._watchdog)
+        self._mode, self._profile, self._queue = "idle", None, []
+        self._qd = np.zeros(6)
+        self.runtime_state, self._watchdog = 1, None
+
+    def _command_arrived(self) -> None:
+        """A command package reached the controller: it feeds the RTDE watchdog."""
+        self._advance()  # the watchdog may have expired before this package arrived
+        self._last_input = self.clock.now()
+
+    def _start_script(self) -> None:
+        """What a new ``RTDEControlInterface`` does (doc 4.1): upload its script and start
+        it, replacing a program that ran (and its watchdog); ur_rtde raises when the
+        program cannot start (doc 4.3)."""
+        with self._lock:
+            self._advance()
+            self._watchdog = None
+            if self.runtime_state == states.RUNTIME_PLAYING:
+                return
+            if self.robot_mode != states.ROBOT_MODE_RUNNING or self.safety_mode not in (1, 2):
+                raise RuntimeError("ur_rtde: Failed to start control script, before timeout of 5 seconds")
+            self.runtime_state = states.RUNTIME_PLAYING
 
     def _start_profile(self, q1: np.ndarray, speed: float, accel: float, t0: float) -> None:
         dq = q1 - self._q
@@ -426,12 +515,49 @@ class FakeRTDEControl(_FakeInterface):
     def __init__(self, hostname: str, frequency: float = -1.0, *, controller: FakeURController) -> None:
         super().__init__(hostname, controller)
         self._period_start = 0.0
+        try:
+            controller._start_script()
+        except RuntimeError:
+            self.disconnect()  # ur_rtde's constructor closes its connections as it raises
+            raise
 
     # -- helpers
-    def _ready(self) -> bool:
-        """Wait out an injected command delay, then: can the robot take a command now?"""
-        self._ctrl._block(self._ctrl.command_delay)
-        return self.isConnected() and not self._ctrl.faulted
+    def _send(self, *, realtime: bool = False) -> bool | None:
+        """ur_rtde's ``sendCommand`` up to the script acting on the command, after an
+        injected ``command_delay``. True: the command reached a program that takes it
+        (apply it). False: what ur_rtde returns when it sends nothing (not connected,
+        program stopped, a safety stop), or, for a command lost on the way
+        (:meth:`FakeURController.drop_commands`), after waiting for its 'done'. None: a
+        real-time command lost on the way (ur_rtde returns True; nothing happens). Every
+        package that arrives feeds the RTDE watchdog, also one the script then refuses
+        (ur_rtde sends its clear command then)."""
+        ctrl = self._ctrl
+        ctrl._block(ctrl.command_delay)
+        if not self.isConnected():
+            return False
+        with ctrl._lock:
+            lost = ctrl.commands_lost
+            if lost:
+                ctrl._advance()
+            else:
+                ctrl._command_arrived()
+            refused = ctrl.faulted
+        if refused:  # ur_rtde reads the state first: no wait
+            return False
+        if lost:
+            if realtime:
+                return None
+            ctrl._block(_EXECUTION_TIMEOUT)
+            return False
+        return True
+
+    def _arrived(self) -> None:
+        """A query command (IK, FK, safety limits) reaches the controller: it feeds the
+        RTDE watchdog like any other command package."""
+        if self.isConnected():
+            with self._ctrl._lock:
+                if not self._ctrl.commands_lost:
+                    self._ctrl._command_arrived()
 
     def _wait_motion(self, blocking_timeout: float = 300.0) -> bool:
         """Blocking move: poll (real time, 5 ms) until the clock has carried it out."""
@@ -453,7 +579,7 @@ class FakeRTDEControl(_FakeInterface):
     # -- moves
     def moveJ(self, q: Sequence[Any], speed: float = 1.05, acceleration: float = 1.4, asynchronous: bool = False) -> bool:
         """Joint move (or path of [q(6), speed, acceleration, blend]); True when accepted/done."""
-        if not self._ready():
+        if not self._send():
             return False
         moves = [(list(p[:6]), float(p[6]), float(p[7])) for p in q] if self._is_path(q) else [(list(q), speed, acceleration)]
         if any(not self._ctrl.joints_within_limits(m[0]) for m in moves):
@@ -476,24 +602,30 @@ class FakeRTDEControl(_FakeInterface):
         return self.moveJ(list(q), speed, acceleration, asynchronous)
 
     def servoJ(self, q: Sequence[float], speed: float, acceleration: float, time: float, lookahead_time: float, gain: float) -> bool:
-        """Stream a joint target; the arm tracks it at its speed limit until the watchdog."""
-        if not self._ready() or not self._ctrl.joints_within_limits(q):
+        """Stream a joint target; the arm tracks it at its speed limit and holds it (the
+        script servos to the last target until another command or a program stop)."""
+        sent = self._send(realtime=True)
+        if sent is None:
+            return True
+        if not sent or not self._ctrl.joints_within_limits(q):
             return False
         with self._ctrl._lock:
             self._ctrl._advance()
             self._ctrl._mode = "servo"
             self._ctrl._servo_target = np.array(q, dtype=float)
-            self._ctrl._last_stream = self._ctrl.clock.now()
         return True
 
     def speedJ(self, qd: Sequence[float], acceleration: float = 0.5, time: float = 0.0) -> bool:
-        if not self._ready():
+        """Joint speeds [rad/s], kept until another command or a program stop."""
+        sent = self._send(realtime=True)
+        if sent is None:
+            return True
+        if not sent:
             return False
         with self._ctrl._lock:
             self._ctrl._advance()
             self._ctrl._mode = "speed"
             self._ctrl._servo_speed = np.array(qd, dtype=float)
-            self._ctrl._last_stream = self._ctrl.clock.now()
         return True
 
     def _decelerate(self, a: float) -> None:
@@ -511,7 +643,7 @@ class FakeRTDEControl(_FakeInterface):
 
     def stopJ(self, a: float = 2.0, asynchronous: bool = False) -> None:
         """Decelerate at ``a`` [rad/s^2] to rest (returns None, like ur_rtde)."""
-        if not self._ready():
+        if not self._send():
             return
         self._decelerate(a)
         if not asynchronous:
@@ -521,7 +653,7 @@ class FakeRTDEControl(_FakeInterface):
         self.stopJ(a, asynchronous)
 
     def servoStop(self, a: float = 10.0) -> bool:
-        if not self._ready():
+        if not self._send():
             return False
         self._decelerate(a)
         return True
@@ -530,6 +662,8 @@ class FakeRTDEControl(_FakeInterface):
         return self.servoStop(a)
 
     def triggerProtectiveStop(self) -> bool:
+        if not self._send():
+            return False
         self._ctrl.protective_stop()
         return True
 
@@ -538,6 +672,9 @@ class FakeRTDEControl(_FakeInterface):
         return self.isConnected() and self._ctrl.runtime_state == 2
 
     def isSteady(self) -> bool:
+        """A command in ur_rtde: False when it cannot be sent (program stopped, ...)."""
+        if not self._send():
+            return False
         with self._ctrl._lock:
             self._ctrl._advance()
             return self._ctrl._mode == "idle" and not np.any(self._ctrl._qd)
@@ -553,24 +690,29 @@ class FakeRTDEControl(_FakeInterface):
 
     # -- kinematics and safety
     def getInverseKinematics(self, x: Sequence[float], qnear: Sequence[float] = (), max_position_error: float = 1e-10, max_orientation_error: float = 1e-10) -> list[float]:
+        self._arrived()
         q = self._ctrl.inverse_kinematics(x, list(qnear) or None)
         if q is None:
             raise RuntimeError("getInverseKinematics: no solution found")
         return [float(v) for v in q]
 
     def getInverseKinematicsHasSolution(self, x: Sequence[float], qnear: Sequence[float] = (), max_position_error: float = 1e-10, max_orientation_error: float = 1e-10) -> bool:
+        self._arrived()
         return self._ctrl.inverse_kinematics(x, list(qnear) or None) is not None
 
     def getForwardKinematics(self, q: Sequence[float] = (), tcp_offset: Sequence[float] = ()) -> list[float]:
+        self._arrived()
         with self._ctrl._lock:
             self._ctrl._advance()
             qq = list(q) if q else list(self._ctrl._q)
         return urmodel.matrix_to_pose(urmodel.forward_kinematics(qq, self._ctrl.model))
 
     def isJointsWithinSafetyLimits(self, q: Sequence[float]) -> bool:
+        self._arrived()
         return self._ctrl.joints_within_limits(q)
 
     def isPoseWithinSafetyLimits(self, pose: Sequence[float]) -> bool:
+        self._arrived()
         return not self._ctrl.safety_refuses and self._ctrl.inverse_kinematics(pose, None) is not None
 
     # -- pacing and housekeeping
@@ -585,27 +727,38 @@ class FakeRTDEControl(_FakeInterface):
             threading.Event().wait(left)
 
     def setWatchdog(self, min_frequency: float = 10.0) -> bool:
-        self._ctrl.servo_timeout = 1.0 / min_frequency
+        """Arm the program's RTDE watchdog: no command package for ``1 / min_frequency``
+        s of clock time stops the program (the script's
+        ``rtde_set_watchdog("input_int_register_0", f, "stop")``). ValueError for a
+        frequency that is not a positive finite number (the fake's own check)."""
+        if not (math.isfinite(min_frequency) and min_frequency > 0):
+            raise ValueError(f"setWatchdog: min_frequency must be a positive finite number, got {min_frequency}")
+        if not self._send():
+            return False
+        with self._ctrl._lock:
+            self._ctrl._watchdog = 1.0 / min_frequency
         return True
 
     def kickWatchdog(self) -> bool:
-        with self._ctrl._lock:
-            self._ctrl._last_stream = self._ctrl.clock.now()
-        return True
+        """A real-time command package: it feeds the watchdog when it arrives."""
+        return self._send(realtime=True) is not False
 
     def setTcp(self, pose: Sequence[float]) -> bool:
-        return self._ready()
+        return self._send() is True
 
     def setPayload(self, mass: float, cog: Sequence[float] = ()) -> bool:
-        return self._ready()
+        return self._send() is True
 
     def stopScript(self) -> None:
-        self._ctrl.stop_program()
+        if self._send():
+            self._ctrl.stop_program()
 
     def reuploadScript(self) -> bool:
+        """Upload and start the script again (a new program: no watchdog)."""
+        if not self.isConnected():
+            return False
         with self._ctrl._lock:
-            if not self.isConnected():
-                return False
-            self._ctrl.runtime_state = 2
+            self._ctrl._advance()
+            self._ctrl.runtime_state, self._ctrl._watchdog = states.RUNTIME_PLAYING, None
         return True
 

@@ -13,8 +13,9 @@ pair and waits for the answer with a deadline (``Connection.poll`` releases the 
 call that overruns its deadline gets the host killed (SIGKILL), which closes its
 connections to the controller, and raises :class:`RTDEHostError`.
 
-The child ignores SIGINT and SIGHUP (a terminal's Ctrl-C or hang-up reaches the whole
-process group; the parent decides when the arm stops and stops it through the host),
+The child ignores SIGINT, SIGHUP and SIGTERM (a terminal's Ctrl-C or hang-up reaches
+the whole process group, systemd's stop every process of the unit; the parent decides
+when the arm stops and stops it through the host, then closes the host),
 dies with the parent thread that started it (Linux ``PR_SET_PDEATHSIG``: SIGKILL, so a
 crashed parent leaves no host behind), and leaves with ``os._exit`` on ``quit`` or when
 the parent's end closes, without running ur_rtde destructors (which can abort the
@@ -321,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--fd", type=int, required=True, help="inherited socket to the parent")
     ap.add_argument("--parent", type=int, required=True, help="pid of the parent process")
     args = ap.parse_args(argv)
-    for sig in (signal.SIGINT, signal.SIGHUP):
+    for sig in (signal.SIGINT, signal.SIGHUP, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
     logging.basicConfig(level=logging.WARNING, format="rtde_host: %(message)s")
     _die_with_parent(args.parent)

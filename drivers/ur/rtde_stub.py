@@ -36,8 +36,22 @@ seconds old, i.e. late; 0 turns each off), ``silence`` (``after`` N: the next N 
 connections are served, later ones accepted but never answered; null: off),
 ``garbage`` (``on``: every request is answered with bytes that are not RTDE),
 ``not_found`` (``names``: variables answered ``NOT_FOUND``), ``set_joints`` (``q``
-[rad], optional ``qd`` [rad/s]), ``stats``, ``quit``.
+[rad], optional ``qd`` [rad/s], both held), ``move`` (``qd`` [rad/s]: the arm moves, its
+positions advancing over the stub's time while the program runs), ``watchdog``
+(``frequency`` [Hz] or null, ``variable``), ``deaf`` (``on``: requests and data from
+clients are read and dropped, the stream goes on), ``stats``, ``quit``.
 :class:`RTDEStub` drives all of this from the parent process.
+
+The controller's RTDE watchdog (``watchdog``): what URScript
+``rtde_set_watchdog(variable, frequency, "stop")`` does, the call ur_rtde's control script
+makes for ``setWatchdog`` with ``input_int_register_0``. When no client's data package
+updates the variable for ``1 / frequency`` s, the program stops: runtime state 1 (the
+program-running bit clears), the arm stops (the stub: at once), the watchdog is removed
+with the program, and the stop is recorded (``stats``: ``watchdog_stops``, in the stub's
+own time, the ``timestamp`` it streams). The control interface, which feeds register 0
+with every command, cannot run against the stub (docs/protocols.md 4.5); a client that
+writes the watched variable the same way (ur_rtde's IO interface writes registers 18-22)
+stands in for it.
 """
 
 from __future__ import annotations
@@ -140,6 +154,14 @@ class StubServer:
         self._inputs_seen: list[dict[str, Any]] = []
         self._last_output_names: list[str] = []
         self._last_frequency = 0.0
+        self._moving = False  # ``move``: q advances by qd over time while the program runs
+        self._t_q = 0.0  # when q was last brought up to date (monotonic)
+        self._deaf = False
+        self._watched = ""  # the watchdog's input variable ("" : not armed)
+        self._watch_period = 0.0
+        self._last_update = 0.0  # monotonic time of the last data package updating it
+        self._watchdog_updates = 0
+        self._watchdog_stops: list[dict[str, Any]] = []
 
     # -- lifecycle
     def _listen(self) -> None:
@@ -181,6 +203,7 @@ class StubServer:
                         self._control()
                     else:
                         self._read(key.data)
+                self._check_watchdog()
                 self._stream()
         finally:
             for c in list(self._clients.values()):
@@ -192,6 +215,8 @@ class StubServer:
     def _next_deadline(self) -> float:
         times = [c.next_send for c in self._clients.values() if c.streaming and not c.silent and not self._frozen]
         times += [c.held[0][0] + self._hold for c in self._clients.values() if c.held]
+        if self._watched:
+            times.append(self._last_update + self._watch_period)
         return min(times) if times else time.monotonic() + 0.1
 
     # -- control channel
@@ -253,9 +278,38 @@ class StubServer:
             qd = [float(x) for x in cmd.get("qd", [0.0] * 6)]
             if len(q) != 6 or len(qd) != 6:
                 raise ValueError("q and qd need 6 values")
-            self.q, self.qd = q, qd
+            self.q, self.qd, self._moving = q, qd, False
+        elif name == "move":
+            qd = [float(x) for x in cmd["qd"]]
+            if len(qd) != 6:
+                raise ValueError("qd needs 6 values")
+            self._integrate(time.monotonic())
+            if self.runtime_state != states.RUNTIME_PLAYING or self._faulted():
+                raise ValueError("the arm cannot move: no program running or a safety stop")
+            self.qd, self._moving = qd, True
+        elif name == "watchdog":
+            freq = cmd["frequency"]
+            if freq is None:
+                self._watched = ""
+            else:
+                freq, variable = float(freq), str(cmd.get("variable", "input_int_register_0"))
+                if not 0.0 < freq < float("inf"):
+                    raise ValueError("frequency must be a positive finite number of Hz")
+                if not variable.startswith("input_") or codec.variable_type(variable) == codec.NOT_FOUND:
+                    raise ValueError(f"{variable!r} is not an RTDE input variable")
+                if self.runtime_state != states.RUNTIME_PLAYING:
+                    raise ValueError("no program is running (a watchdog is set by the running program)")
+                self._watched, self._watch_period, self._last_update = variable, 1.0 / freq, time.monotonic()
+        elif name == "deaf":
+            self._deaf = bool(cmd["on"])
         elif name == "stats":
+            self._integrate(time.monotonic())
             return {
+                "q": self.q,
+                "qd": self.qd,
+                "runtime_state": self.runtime_state,
+                "watchdog_updates": self._watchdog_updates,
+                "watchdog_stops": self._watchdog_stops,
                 "clients": len(self._clients),
                 "accepted": self._accepted,
                 "packages_sent": self._packages_sent,
@@ -320,6 +374,8 @@ class StubServer:
         if not data:
             self._close(c)
             return
+        if self._deaf:  # the link carries nothing to the controller any more
+            return
         try:
             packages, c.buffer = codec.split_packages(c.buffer + data)
             for p in packages:
@@ -374,6 +430,11 @@ class StubServer:
             self._send(c, codec.encode_accepted(t, True))
         elif t == PackageType.DATA_PACKAGE:
             rid, values = codec.decode_data(p.payload, c.inputs)
+            if self._watched and self._watched in c.input_names[rid]:
+                now = time.monotonic()
+                self._integrate(now)  # the watchdog may have expired before this package
+                self._last_update = now
+                self._watchdog_updates += 1
             self._inputs_seen.append(
                 {"recipe": rid, "values": dict(zip(c.input_names[rid], [_jsonable(v) for v in values]))}
             )
@@ -387,10 +448,47 @@ class StubServer:
         runtime_state = int(cmd.get("runtime_state", self.runtime_state))
         bits = states.safety_status_bits(safety_mode)  # ValueError for unknown numbers
         status = states.robot_status_bits(robot_mode, runtime_state)
+        self._integrate(time.monotonic())
         self.robot_mode, self.safety_mode, self.runtime_state = robot_mode, safety_mode, runtime_state
         self.safety_status_bits, self.robot_status_bits = bits, status
-        if states.safety_fault(safety_mode, bits) or robot_mode != states.ROBOT_MODE_RUNNING:
-            self.qd = [0.0] * 6
+        if self._faulted():
+            self.qd, self._moving = [0.0] * 6, False
+        if runtime_state != states.RUNTIME_PLAYING:  # the program ended: its watchdog goes with it
+            self._watched = ""
+
+    def _faulted(self) -> bool:
+        """The arm cannot move: a safety stop, power off, or no program running."""
+        return bool(states.running_fault(self.robot_mode, self.safety_mode, self.safety_status_bits,
+                                         self.runtime_state))
+
+    def _integrate(self, now: float) -> None:
+        """Bring the controller up to ``now`` (monotonic): the watchdog's stop if it
+        expired meanwhile, and the moving arm's positions."""
+        if self._watched and now > self._last_update + self._watch_period:
+            self._watchdog_stop(self._last_update + self._watch_period)
+        self._move_to(now)
+
+    def _move_to(self, now: float) -> None:
+        if self._moving and now > self._t_q:
+            dt = now - self._t_q
+            self.q = [x + v * dt for x, v in zip(self.q, self.qd)]
+        self._t_q = max(self._t_q, now)
+
+    def _check_watchdog(self) -> None:
+        self._integrate(time.monotonic())
+
+    def _watchdog_stop(self, expiry: float) -> None:
+        """The watched input went without an update for the watchdog's period: the
+        program stops at ``expiry`` (monotonic), the arm with it; recorded."""
+        self._move_to(expiry)
+        self._watchdog_stops.append({
+            "t": expiry - self._t0, "last_update": self._last_update - self._t0, "period": self._watch_period,
+            "variable": self._watched, "q": list(self.q), "qd": list(self.qd),
+        })
+        self.qd, self._moving, self._watched = [0.0] * 6, False, ""
+        self.runtime_state = 1
+        self.robot_status_bits = states.robot_status_bits(self.robot_mode, self.runtime_state)
+        log.info("no update of the watched input for %.3f s: program stopped", self._watch_period)
 
     def _type(self, name: str) -> str:
         return codec.NOT_FOUND if name in self._not_found else codec.variable_type(name)
@@ -429,6 +527,7 @@ class StubServer:
         if self._frozen:
             return
         now = time.monotonic()
+        self._integrate(now)
         for c in list(self._clients.values()):
             if not c.streaming or c.silent:
                 continue
@@ -615,8 +714,27 @@ class RTDEStub:
         """Joint positions [rad] (and velocities [rad/s]) streamed from now on."""
         self.command("set_joints", q=list(q), qd=list(qd) if qd is not None else [0.0] * 6)
 
+    def move(self, qd: Sequence[float]) -> None:
+        """The arm moves at ``qd`` [rad/s]: its positions advance over the stub's time
+        while the program runs (a fault, a program stop or the watchdog stops it)."""
+        self.command("move", qd=list(qd))
+
+    def watchdog(self, frequency: float | None, variable: str = "input_int_register_0") -> None:
+        """Arm the running program's RTDE watchdog on the input ``variable`` (None: remove
+        it): no update for ``1 / frequency`` s stops the program and the arm (see the
+        module doc; ``stats()["watchdog_stops"]`` records it)."""
+        self.command("watchdog", frequency=frequency, variable=variable)
+
+    def deaf(self, on: bool = True) -> None:
+        """The link stops carrying anything to the controller: every client's requests
+        and data packages are dropped (connections stay open, the stream goes on)."""
+        self.command("deaf", on=on)
+
     def stats(self) -> dict[str, Any]:
-        """Clients, accepted connections, packages sent, input packages seen, last recipe."""
+        """Clients, accepted connections, packages sent, input packages seen, last recipe;
+        the arm's ``q``, ``qd``, ``runtime_state``; ``watchdog_updates`` (data packages
+        that fed the watchdog) and ``watchdog_stops`` (each: ``t`` and ``last_update`` in
+        the stub's time [s], ``period``, ``variable``, ``q`` and ``qd`` as it stopped)."""
         return self.command("stats")
 
     def stop(self) -> None:

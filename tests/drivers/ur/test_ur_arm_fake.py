@@ -10,7 +10,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
-from urtest_helpers import step_until, sync, wait_for
+from urtest_helpers import run_for, step_until, sync, wait_for
 
 from mmexec.drivers.interfaces import GoalState, JointTrajectory, ManualClock
 from mmexec.drivers.ur import model as urmodel
@@ -46,8 +46,7 @@ def test_move_to_takes_clock_time_and_arrives(rig: tuple[URArm, FakeURController
     arm, _ctrl, clock = rig
     goal = arm.move_to(_q(0.5), speed_scale=1.0)
     sync(arm, clock)  # the worker has sent moveJ at t = 0
-    clock.advance(0.2)
-    sync(arm, clock)
+    run_for(arm, clock, 0.2)
     assert goal.state is GoalState.ACTIVE
     assert 0.0 < arm.state().positions[0] < 0.5
     took = step_until(arm, clock, goal)
@@ -92,8 +91,7 @@ def test_cancel_decelerates_then_cancelled(rig: tuple[URArm, FakeURController, M
     assert max(abs(x) for x in state.velocities) < arm.config.rest_speed
     assert 0.1 < state.positions[0] < 1.0  # stopped on the way, not at the target
     # the arm holds: more clock time does not move it
-    clock.advance(1.0)
-    sync(arm, clock)
+    run_for(arm, clock, 1.0)
     assert arm.state().positions[0] == pytest.approx(state.positions[0], abs=1e-9)
 
 
@@ -142,8 +140,7 @@ def test_limits_rejected_before_anything_is_sent(rig: tuple[URArm, FakeURControl
     assert g.state is GoalState.FAILED and g.reason.startswith("wrist_3_joint")
     g = arm.follow(JointTrajectory(("a", "b", "c", "d", "e", "f"), (1.0,), (HOME,)))
     assert g.state is GoalState.FAILED and "differ" in g.reason
-    clock.advance(0.5)
-    sync(arm, clock)
+    run_for(arm, clock, 0.5)
     assert arm.state().positions == pytest.approx(HOME)  # nothing moved
     assert ctrl._mode == "idle"
 
@@ -179,8 +176,7 @@ def test_busy_and_not_connected_are_refused(rig: tuple[URArm, FakeURController, 
 def test_reconnect_after_connection_loss(rig: tuple[URArm, FakeURController, ManualClock]) -> None:
     arm, ctrl, clock = rig
     goal = arm.move_to(_q(1.0))
-    clock.advance(0.1)
-    sync(arm, clock)
+    run_for(arm, clock, 0.1)
     ctrl.drop_connections()
     step_until(arm, clock, goal, limit=0.5)
     assert goal.reason.startswith("connection lost")
@@ -306,18 +302,33 @@ def test_fake_states_follow_the_vendor_numbers() -> None:
     assert (r.getRobotMode(), r.getSafetyMode(), r.getRuntimeState()) == (7, 1, 1)  # unchanged
 
 
-def test_fake_servo_watchdog_and_ik() -> None:
+def test_fake_rtde_watchdog_and_ik() -> None:
     clock = ManualClock()
-    ctrl = FakeURController(clock, servo_timeout=0.1)
+    ctrl = FakeURController(clock)
     ctl = ctrl.control_factory("h")
     rcv = ctrl.receive_factory("h")
     assert ctl.servoJ(list(_q(1.0)), 0, 0, 0.002, 0.1, 300)
     clock.advance(0.05)
-    moved = rcv.getActualQ()[0]
-    assert moved == pytest.approx(0.05 * math.pi)
-    clock.advance(0.5)  # no servoJ for longer than the watchdog: the arm stops
-    assert rcv.getActualQ()[0] == pytest.approx(0.1 * math.pi)
-    assert ctrl.watchdog_expired == 1 and ctl.isSteady()
+    assert rcv.getActualQ()[0] == pytest.approx(0.05 * math.pi)
+    clock.advance(0.5)  # no watchdog armed: the script servos on to the last target and holds it
+    assert rcv.getActualQ()[0] == pytest.approx(1.0) and rcv.getRuntimeState() == 2
+    assert ctl.setWatchdog(10.0)
+    assert ctl.servoJ(list(HOME), 0, 0, 0.002, 0.1, 300)  # back towards 0
+    clock.advance(0.05)
+    assert ctl.kickWatchdog()
+    t_kick = clock.now()
+    clock.advance(0.08)  # less than 1 / 10 Hz since the kick: running
+    assert rcv.getRuntimeState() == 2 and rcv.getActualQd()[0] == pytest.approx(-math.pi)
+    clock.advance(0.5)  # silence longer than the watchdog period: the program stops, the arm with it
+    (stop,) = ctrl.watchdog_stops
+    assert stop.t == pytest.approx(t_kick + 0.1) and stop.last_input == pytest.approx(t_kick)
+    assert stop.q[0] == pytest.approx(1.0 - 0.15 * math.pi) and stop.qd[0] == pytest.approx(-math.pi)
+    assert rcv.getActualQ()[0] == pytest.approx(stop.q[0]) and rcv.getActualQd() == [0.0] * 6
+    assert rcv.getRuntimeState() == 1 and not ctl.servoJ(list(HOME), 0, 0, 0.002, 0.1, 300)
+    ctl2 = ctrl.control_factory("h")  # a new control interface starts the script again
+    assert rcv.getRuntimeState() == 2 and ctl2.servoJ(list(HOME), 0, 0, 0.002, 0.1, 300)
+    clock.advance(1.0)  # the new program has no watchdog until setWatchdog
+    assert len(ctrl.watchdog_stops) == 1 and rcv.getActualQ()[0] == pytest.approx(0.0)
     q = [0.3, -1.2, 1.3, -1.5, -1.5, 0.2]
     pose = ctl.getForwardKinematics(q)
     assert ctl.getInverseKinematics(pose, [0.25, -1.15, 1.25, -1.45, -1.45, 0.15]) == pytest.approx(q, abs=1e-3)

@@ -165,8 +165,21 @@ def test_bring_up_fails_in_one_line_naming_host_and_port(tmp_path: Path, kind: s
     assert (run_end["event"], run_end["exit_code"]) == ("run_end", 2)
 
 
+#: halting signal -> (exit code, the one line on stderr); each sent to the whole process
+#: group: a terminal's Ctrl-C and hang-up do that, and so does systemd's stop
+HALTS = {
+    signal.SIGINT: (130, "mmexec: interrupted"),
+    signal.SIGTERM: (143, "mmexec: interrupted (SIGTERM)"),
+    signal.SIGHUP: (129, "mmexec: interrupted (SIGHUP)"),
+}
+
+
+@pytest.mark.parametrize("sig", list(HALTS), ids=[s.name for s in HALTS])
 @pytest.mark.parametrize("kind", ["silent", "stalls ur_rtde"])
-def test_ctrl_c_during_the_hang_exits_130(tmp_path: Path, kind: str) -> None:
+def test_a_halting_signal_during_the_hang_ends_bring_up(tmp_path: Path, kind: str, sig: signal.Signals) -> None:
+    """Before the fix only SIGINT ended the bring-up; SIGTERM and SIGHUP waited out the
+    connect deadline (here 600 s: the test's bound of 60 s fails first)."""
+    code, line = HALTS[sig]
     with controller(kind) as (host, accepted):
         # a deadline far beyond the test's bounds: only the signal can end the bring-up
         mission, config, log = write_run(tmp_path, host, connect_timeout=600.0)
@@ -177,10 +190,10 @@ def test_ctrl_c_during_the_hang_exits_130(tmp_path: Path, kind: str) -> None:
             assert proc.poll() is None, proc.communicate()
             if kind == "stalls ur_rtde":
                 assert wait_for(lambda: len(host_processes(proc.pid)) == 1, START_LIMIT)
-            os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C: the whole foreground group
+            os.killpg(proc.pid, sig)
             out, err = proc.communicate(timeout=EXIT_LIMIT)
-            assert proc.returncode == 130, (out, err)
-            assert wait_for(lambda: host_processes(proc.pid) == [], EXIT_LIMIT)
-    assert err.strip().splitlines() == ["mmexec: interrupted"]
+            assert proc.returncode == code, (out, err)
+            assert wait_for(lambda: host_processes(proc.pid) == [], EXIT_LIMIT)  # what was opened is closed
+    assert err.strip().splitlines() == [line]
     run_end = read_log(log)[-1]
-    assert (run_end["event"], run_end["exit_code"]) == ("run_end", 130)
+    assert run_end == {**run_end, "event": "run_end", "outcome": "interrupted", "signal": sig.name, "exit_code": code}

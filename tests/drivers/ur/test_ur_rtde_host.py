@@ -111,6 +111,7 @@ def test_host_ignores_ctrl_c(stub: RTDEStub, rtde_host: RTDEHost) -> None:
                             timeout=LIMIT, call_timeout=LIMIT, method_timeouts={"disconnect": LIMIT})
     os.kill(pid, signal.SIGINT)  # a terminal's Ctrl-C reaches the whole process group
     os.kill(pid, signal.SIGHUP)
+    os.kill(pid, signal.SIGTERM)  # so does systemd's stop (every process of the unit)
     assert r.isConnected()  # the parent decides when the arm stops, through the host
     r.disconnect()
 

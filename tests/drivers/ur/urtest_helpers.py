@@ -84,3 +84,15 @@ def step_until(arm: URArm, clock: ManualClock, goal: Goal, dt: float = 0.02, lim
         sync(arm, clock)
         sync(arm, clock)  # one more cycle: the command sent after the read has been applied
     return clock.now() - t0
+
+
+def run_for(arm: URArm, clock: ManualClock, seconds: float, dt: float = 0.02) -> None:
+    """Advance the clock by ``seconds`` in steps of ``dt``, letting the worker cycle after
+    each: a driver that keeps up. (One large ``clock.advance`` is, to the controller, a
+    driver silent that long: its RTDE watchdog stops the program after ``1 /
+    watchdog_frequency`` s.)"""
+    end = clock.now() + seconds
+    while clock.now() < end - 1e-9:
+        clock.advance(min(dt, end - clock.now()))
+        sync(arm, clock)
+        sync(arm, clock)  # one more cycle: the command sent after the read has been applied
