@@ -29,6 +29,11 @@ extra are constructed (no I/O), so a missing ``pyrealsense2`` fails at once. A d
 does not answer raises :class:`DeviceUnavailable`, a one-line error naming the config
 line, the device and its port, after closing what was opened.
 Relative paths (``map.yaml``) are relative to the config file.
+
+:data:`BACKEND` is its :class:`~mmexec.drivers.backendspec.BackendSpec`: the capabilities
+are the planned device slots (:func:`check`, nothing opened); the navigation map is
+``robot.map``; no run option applies and no fault is injected (a campaign runs the config
+as written).
 """
 
 from __future__ import annotations
@@ -49,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, did_you_mean
+from mmexec.drivers.backendspec import BackendSpec, NavMap
 from mmexec.drivers.interfaces import (
     CapabilityError,
     MonotonicClock,
@@ -59,6 +65,7 @@ from mmexec.drivers.interfaces import (
 )
 
 __all__ = [
+    "BACKEND",
     "DEVICE_KINDS",
     "BringUpInterrupted",
     "DeviceUnavailable",
@@ -717,3 +724,34 @@ def _load_scene(section: YDict, problems: Problems) -> tuple[SceneBox, ...]:
     if not boxes:
         return ()
     return tuple(SceneBox(b.name, pose_matrix(b.xyz, b.rpy), b.size) for b in boxes if b is not None)
+
+
+# --------------------------------------------------------------------------- the backend spec
+
+
+def _parse(section: YDict | None) -> list[_Plan]:
+    """The devices a ``robot:`` section plans to bring up (InputError as :func:`check`)."""
+    return _plan(section, {})[1]
+
+
+def _capabilities(plans: list[_Plan]) -> frozenset[str]:
+    """The capability slots the planned devices fill."""
+    return frozenset(slot for slot, _label, _mark, _connect in plans)
+
+
+def _navigation(section: YDict | None) -> NavMap | None:
+    """``robot.map`` and the planned base's footprint radius; None without either."""
+    grid, radius = check_navigation(section)
+    if grid is None or radius is None:
+        return None
+    return NavMap(grid, radius, "robot.map")
+
+
+#: The ``robot`` backend, as the executive's registry sees it.
+BACKEND: BackendSpec[list[_Plan]] = BackendSpec(
+    name="robot",
+    parse_section=_parse,
+    capabilities=_capabilities,
+    build=build,
+    navigation=_navigation,
+)

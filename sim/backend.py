@@ -15,6 +15,11 @@ relative path is taken from the config file's folder; none by default).
 
 ``options``: ``gui`` (bool) opens the pybullet window; ``record`` (Path or None) writes a
 chase-camera video, finalised by :meth:`SimRobot.close`.
+
+:data:`BACKEND` is its :class:`~mmexec.drivers.backendspec.BackendSpec`: a simulated robot
+has every capability; ``world`` given as a path is checked when the config loads; the
+navigation map is the world's; the campaign's fault profiles set ``faults``
+(:data:`FAULTS_OFF`, :data:`FAULT_PATCHES`) and draw the world per trial (``randomize``).
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ import pybullet as p
 
 from mmexec.config.yamlload import Mark, Problems, YDict, bind, did_you_mean
 from mmexec.drivers import descriptions
+from mmexec.drivers.backendspec import CAPABILITIES, BackendSpec, NavMap, SectionFile
 from mmexec.drivers.interfaces import (
     CameraIntrinsics,
     CapabilityError,
@@ -66,9 +72,10 @@ from mmexec.sim.scene import (
     spawn_world,
 )
 from mmexec.sim.truth import TruthLog, open_truth_log, truth_log_path
-from mmexec.sim.world import World, load_world
+from mmexec.sim.world import WORLDS_DIR, World, load_world
 
-__all__ = ["CameraSection", "LidarSection", "OdometrySection", "SimError", "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
+__all__ = ["BACKEND", "FAULTS_OFF", "FAULT_PATCHES", "CameraSection", "LidarSection", "OdometrySection", "SimError",
+           "SimRobot", "SimSection", "SimTruth", "build", "parse_section"]
 
 log = logging.getLogger(__name__)
 
@@ -503,3 +510,67 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
     except BaseException:
         p.disconnect(physicsClientId=cid)
         raise
+
+
+# --------------------------------------------------------------------------- the backend spec
+
+
+def capabilities(cfg: SimSection) -> frozenset[str]:
+    """A simulated robot has every capability, whatever its section says."""
+    return frozenset(CAPABILITIES)
+
+
+def is_world_path(value: str) -> bool:
+    """``sim.world`` is read as a path (from the current folder) when it has a '/' or a
+    .yaml/.yml ending, as the name of a shipped world otherwise."""
+    return "/" in value or value.endswith((".yaml", ".yml"))
+
+
+def navigation(section: YDict | None) -> NavMap:
+    """The map of the section's world (nominal poses) and the simulated robot's footprint
+    radius, found without starting physics; InputError for a bad section or world file."""
+    from mmexec.sim.mapgen import world_map
+
+    cfg = parse_section(section)
+    mark = section.value_mark("world") if isinstance(section, YDict) and "world" in section else None
+    world = load_world(cfg.world, randomize=False, mark=mark)
+    return NavMap(world_map(world), descriptions.get(cfg.robot).info.footprint_radius,
+                  f"the map of world {world.name!r}")
+
+
+def item_markers(section: Mapping[str, Any] | None) -> tuple[int, ...]:
+    """The marker ids of the items of the section's world (nominal world, ``lab`` by
+    default)."""
+    world = load_world(str((section or {}).get("world", "lab")))
+    return tuple(it.marker for it in world.spec.items)
+
+
+#: Merge patch of the ``sim:`` section that switches every injected fault off (sensor and
+#: odometry noise stay as configured).
+FAULTS_OFF: dict[str, Any] = {"faults": None}
+
+#: Built-in fault profile (``mmexec campaign --faults``) -> its ``sim.faults``, on top of
+#: :data:`FAULTS_OFF` (:mod:`mmexec.sim.faults`; goal numbers count every arm goal of the
+#: trial, so in ``fetch_item`` goal 1 is the initial tuck).
+FAULT_PATCHES: dict[str, dict[str, Any]] = {
+    "arm_fail_first": {"faults": {"arm_fail_attempts": [1]}},
+    "arm_fail_second": {"faults": {"arm_fail_attempts": [2]}},
+    "arm_fail_twice": {"faults": {"arm_fail_attempts": [1, 2]}},
+    "arm_fail_always": {"faults": {"arm_fail": "always"}},
+    "sensor_dropout": {"faults": {"camera_dropout": {"p": 0.2}, "lidar_dropout": {"p": 0.2}}},
+}
+
+#: The ``sim`` backend, as the executive's registry sees it.
+BACKEND: BackendSpec[SimSection] = BackendSpec(
+    name="sim",
+    parse_section=parse_section,
+    capabilities=capabilities,
+    build=build,
+    options=frozenset({"gui", "record"}),
+    files=(SectionFile("world", "a world", (WORLDS_DIR,), is_world_path),),
+    navigation=navigation,
+    faults_off=FAULTS_OFF,
+    fault_patches=FAULT_PATCHES,
+    randomize_key="randomize",
+    item_markers=item_markers,
+)

@@ -4,8 +4,8 @@
 
 * ``config`` (safe loading, shared file helpers) imports nothing else of mmexec;
 * the capability contract (``drivers.interfaces``, the robot descriptions of
-  ``drivers.descriptions`` and the map formats of ``drivers.maps``) imports only ``config``
-  and itself;
+  ``drivers.descriptions``, the map formats of ``drivers.maps`` and what a backend
+  declares about itself, ``drivers.backendspec``) imports only ``config`` and itself;
 * ``drivers`` and ``sim`` never import ``skills`` or ``executive``;
 * ``skills`` never import ``executive``, ``sim`` or a device package (any ``drivers.X``
   outside the contract); the one exception is the skill test kit's pytest plugin, which
@@ -25,7 +25,8 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 FOLDERS = ("executive", "skills", "drivers", "sim", "config", "trees")
-CONTRACT = ("drivers.interfaces", "drivers.descriptions", "drivers.maps", "drivers.geometry")
+CONTRACT = ("drivers.interfaces", "drivers.descriptions", "drivers.maps", "drivers.geometry",
+            "drivers.backendspec")
 #: (importer prefix, imported prefix) pairs allowed against the rules above, with the reason
 ALLOWED = {("skills.testing.pytest_plugin", "drivers.mock"): "the test kit's fixtures build the mock robot"}
 

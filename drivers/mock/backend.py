@@ -14,6 +14,10 @@ Section schema (every key optional)::
 
 Unknown keys and wrong types are :class:`~mmexec.config.yamlload.InputError` problems
 located at ``FILE:LINE:COL``.
+
+:data:`BACKEND` is its :class:`~mmexec.drivers.backendspec.BackendSpec`: the robot has the
+section's ``capabilities``; no run option applies; the campaign's fault profiles script
+arm, grasp, base and camera failures (:data:`FAULTS_OFF`, :data:`FAULT_PATCHES`).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from mmexec.config.yamlload import Mark, Problems, YDict, bind
+from mmexec.drivers.backendspec import BackendSpec
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.drivers.mock.robot import (
     DEFAULT_ARM_LIMITS,
@@ -34,7 +39,7 @@ from mmexec.drivers.mock.robot import (
     MockRobot,
 )
 
-__all__ = ["MockConfig", "build", "parse_section", "robot_from_config"]
+__all__ = ["BACKEND", "FAULTS_OFF", "FAULT_PATCHES", "MockConfig", "build", "parse_section", "robot_from_config"]
 
 Capability = Literal["base", "arm", "gripper", "camera", "lidar"]
 
@@ -158,3 +163,34 @@ def build(
     """Backend builder for ``backend: mock``. The mock is deterministic, so ``seed`` only
     documents the run; ``options`` (``gui``, ``record``) have no effect on it."""
     return robot_from_config(parse_section(section), profile=profile)
+
+
+def capabilities(cfg: MockConfig) -> frozenset[str]:
+    """The capabilities a mock built from ``cfg`` has: those its section lists."""
+    return frozenset(cfg.capabilities)
+
+
+#: Merge patch of the ``mock:`` section that removes every scripted failure: arm moves
+#: that fail, scripted grasps, gripper faults, a blocked base, camera dropouts.
+FAULTS_OFF: dict[str, Any] = {"arm": {"fail_moves": None}, "gripper": {"grasps": None, "fault_moves": None},
+                              "base": {"blocked": None}, "camera": {"dropouts": None}}
+
+#: Built-in fault profile (``mmexec campaign --faults``) -> the failure it scripts, on
+#: top of :data:`FAULTS_OFF`: arm attempts fail as grasps that close on nothing.
+FAULT_PATCHES: dict[str, dict[str, Any]] = {
+    "arm_fail_first": {"gripper": {"grasps": [False]}},
+    "arm_fail_second": {"gripper": {"grasps": [True, False]}},
+    "arm_fail_twice": {"gripper": {"grasps": [False, False]}},
+    "arm_fail_always": {"gripper": {"default_grasp": False}},
+    "nav_blocked": {"base": {"blocked": True}},
+}
+
+#: The ``mock`` backend, as the executive's registry sees it.
+BACKEND: BackendSpec[MockConfig] = BackendSpec(
+    name="mock",
+    parse_section=parse_section,
+    capabilities=capabilities,
+    build=build,
+    faults_off=FAULTS_OFF,
+    fault_patches=FAULT_PATCHES,
+)
