@@ -32,12 +32,9 @@ serves until SIGINT/SIGTERM.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from types import FrameType
 from typing import TYPE_CHECKING, TypeVar
 
 from mmexec.drivers.dynamixel.bus import (
@@ -360,19 +357,7 @@ def run_fake(args: argparse.Namespace) -> int:
     except ValueError as e:
         print(f"{DEVICE} fake: {e}", file=sys.stderr)
         return 2
-    done = threading.Event()
+    from mmexec.drivers.fakes.pty import serve_until_signal
 
-    def _stop(signum: int, frame: FrameType | None) -> None:
-        done.set()
-
-    old = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        fake.start()
-        print(fake.port, flush=True)
-        while not done.wait(0.5):
-            pass
-    finally:
-        fake.stop()
-        for s, h in old.items():
-            signal.signal(s, h)
+    serve_until_signal(fake, lambda port: print(port, flush=True))
     return 0

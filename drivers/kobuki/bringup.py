@@ -27,12 +27,11 @@ from __future__ import annotations
 
 import argparse
 import math
-import signal
 import sys
-import threading
 import time
 
 from mmexec.drivers.fakes.kobuki import SAFETY_BITS, KobukiFake
+from mmexec.drivers.fakes.pty import serve_until_signal
 from mmexec.drivers.kobuki.device import (
     KobukiConfig,
     KobukiDevice,
@@ -155,19 +154,5 @@ def run_fake(args: argparse.Namespace) -> int:
     fake.set_sensors(battery=args.battery)
     for name in args.fault:
         fake.set_fault(name)
-    done = threading.Event()
-
-    def _on_signal(signum: int, frame: object) -> None:
-        done.set()
-
-    old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    fake.start()
-    try:
-        print(fake.port, flush=True)
-        while not done.wait(0.5):
-            pass
-    finally:
-        fake.stop()
-        for s, h in old.items():
-            signal.signal(s, h)
+    serve_until_signal(fake, lambda port: print(port, flush=True))
     return 0
