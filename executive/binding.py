@@ -3,9 +3,10 @@ config beyond its schema, without opening or starting anything:
 
 * the robot profile against the sections the skill packages declare
   (:mod:`mmexec.skills.profile`): unknown keys with a hint, types, ranges;
-* the navigation map the run will have, from the sim's world file (``sim.world``, its
-  problems located in the world file) or the real robot's ``robot.map``, and the base's
-  footprint radius (the sim model's, or the ``robot.base`` section's);
+* the navigation map the run will have and the base's footprint radius, as the backend
+  finds them from its section (:attr:`~mmexec.drivers.backendspec.BackendSpec.navigation`:
+  the sim's world file, its problems located in the world file, and the model's radius;
+  the real robot's ``robot.map`` and its ``robot.base`` section's radius);
 * every base pose the profile names (``home``, ``places``, the fetch depot stop and search
   locations: the settings declared ``base_pose``) is inside that map, free in the map
   inflated as navigation inflates it (footprint radius plus the profile's nav margin),
@@ -18,9 +19,9 @@ config (``FILE:LINE:COL: profile.fetch.depot.base: ...``), all reported together
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 from mmexec.config.yamlload import InputError, Problem, YDict
+from mmexec.drivers.backendspec import NavMap
 from mmexec.drivers.interfaces import OccupancyGrid
 from mmexec.executive.config import LoadedConfig, profile_problems
 from mmexec.skills.profile import NamedPose, base_poses
@@ -30,40 +31,12 @@ __all__ = ["NavMap", "binding_problems", "navigation_map", "pose_problems"]
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class NavMap:
-    """The occupancy grid a run navigates on, the base's footprint ``radius`` [m], and
-    where the grid comes from (``source``, for messages)."""
-
-    grid: OccupancyGrid
-    radius: float
-    source: str
-
-
 def navigation_map(loaded: LoadedConfig) -> NavMap | None:
     """The map and footprint the configured backend's navigation will use, found without
     opening anything; None when the backend has no map or no base (the mock; a robot
     section without ``map`` or ``base``). InputError for a bad section or world file."""
-    section = loaded.section()
-    if loaded.backend == "sim":
-        from mmexec.sim.backend import parse_section
-        from mmexec.sim.mapgen import world_map
-        from mmexec.sim.models import MODEL_INFO
-        from mmexec.sim.world import load_world
-
-        cfg = parse_section(section)
-        mark = section.value_mark("world") if isinstance(section, YDict) and "world" in section else None
-        world = load_world(cfg.world, randomize=False, mark=mark)
-        return NavMap(world_map(world), MODEL_INFO[cfg.robot].footprint_radius,
-                      f"the map of world {world.name!r}")
-    if loaded.backend == "robot":
-        from mmexec.drivers.robot import check_navigation
-
-        grid, radius = check_navigation(section)
-        if grid is None or radius is None:
-            return None
-        return NavMap(grid, radius, "robot.map")
-    return None
+    navigation = loaded.spec.navigation
+    return navigation(loaded.section()) if navigation is not None else None
 
 
 def _extent(grid: OccupancyGrid) -> str:

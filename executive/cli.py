@@ -246,8 +246,8 @@ def _preload_pybullet_quietly() -> None:
 def _load_for_mission(config: Path | None, *, check_profile: bool = True) -> Any:
     from mmexec.executive.config import load_config, load_skill_modules
 
+    _preload_pybullet_quietly()  # the sim backend and the built-in arm skills import pybullet: no banner
     loaded = load_config(config) if config is not None else None
-    _preload_pybullet_quietly()  # the built-in arm skills import pybullet: no banner
     load_skill_modules(loaded, check=check_profile)
     return loaded
 
@@ -273,70 +273,21 @@ def _walk_specs(root: Any) -> Iterator[Any]:
                         stack.append(it.tree)
 
 
-#: Capabilities a simulated robot always has (``mmexec.sim.backend.SimRobot``).
-SIM_CAPABILITIES: frozenset[str] = frozenset({"base", "arm", "gripper", "camera", "lidar"})
-
-
-def _relocate(e: InputError, loaded: Any) -> InputError:
-    """``e`` with problems a builder could only place at ``<...>`` moved to ``backend:``."""
-    where = loaded.mark("backend")
-    return InputError(Problem(where, p.message) if p.mark.file.startswith("<") else p for p in e.problems)
-
-
-def binding_capabilities(loaded: Any) -> frozenset[str]:
-    """The capabilities the configured robot will have, found WITHOUT opening anything.
-
-    ``robot``: the section is checked by :func:`mmexec.drivers.robot.check` (no port,
-    socket or camera is opened) and the planned device slots are the capabilities.
-    ``mock``: the section's ``capabilities`` list. ``sim``: the section is bound and the
-    simulated robot's fixed set is returned (no physics client is started). Another
-    backend is built (it must then be cheap and in-memory) and closed again.
-    Raises :class:`InputError` for a bad section.
-    """
-    from mmexec.executive.config import BACKENDS, backend_builder, build_robot, robot_capabilities
-
-    backend = loaded.backend
-    section = loaded.section()
-    try:
-        if backend == "robot":
-            from mmexec.drivers.robot import check
-
-            planned = check(section, profile=dict(loaded.config.profile))
-            return frozenset(line.split(":", 1)[0].strip() for line in planned)
-        if backend == "mock":
-            from mmexec.drivers.mock.backend import parse_section as parse_mock
-
-            return frozenset(parse_mock(section, mark=loaded.mark("mock")).capabilities)
-        if backend == "sim":
-            backend_builder(backend, loaded.mark("backend"))  # a missing pybullet is a located error
-            from mmexec.sim.backend import parse_section as parse_sim
-
-            parse_sim(section)
-            return SIM_CAPABILITIES
-    except InputError as e:
-        raise _relocate(e, loaded) from None
-    if backend not in BACKENDS:
-        backend_builder(backend, loaded.mark("backend"))  # raises the located "unknown backend"
-    robot = build_robot(loaded, seed=None, options={"gui": False, "record": None})
-    try:
-        return robot_capabilities(robot)
-    finally:
-        robot.close()
-
-
 def _check_binding(mission: Any, loaded: Any) -> None:
     """InputError with every problem of binding ``mission`` to the config, all at once:
     a bad backend section, each skill leaf needing a capability the configured robot
     lacks, and the profile and its base poses on the robot's map
-    (:func:`mmexec.executive.binding.binding_problems`). Nothing is opened: see
-    :func:`binding_capabilities`."""
+    (:func:`mmexec.executive.binding.binding_problems`). Nothing is opened: the backend
+    finds its capabilities from its section alone
+    (:meth:`~mmexec.executive.config.LoadedConfig.capabilities`; the robot backend's are its
+    planned device slots, the sim's are fixed)."""
     from mmexec.executive.binding import binding_problems
     from mmexec.skills.base import SkillSpec
 
     _preload_pybullet_quietly()
     problems: list[Problem] = []
     try:
-        caps: frozenset[str] | None = binding_capabilities(loaded)
+        caps: frozenset[str] | None = loaded.capabilities()
     except InputError as e:
         problems.extend(e.problems)
         caps = None

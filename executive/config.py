@@ -3,7 +3,7 @@
 A run config is YAML loaded through :mod:`mmexec.config.yamlload` and bound into
 :class:`RunConfig`, so every problem is reported as ``FILE:LINE:COL: key: message``::
 
-    backend: mock            # mock | sim | robot
+    backend: mock            # a registered backend (mmexec.executive.backends): mock | sim | robot
     rate_hz: 20              # tick rate [Hz of clock time], 1..1000
     mock: {...}              # options for the backend named by `backend` (one section
     sim: {...}               #   per backend name; only the selected one is read)
@@ -17,19 +17,25 @@ A run config is YAML loaded through :mod:`mmexec.config.yamlload` and bound into
     roots: [../shared]           # more folders includes and sim worlds may come from
 
 No number in a config may be NaN or infinite (:func:`~mmexec.config.yamlload.bind`).
-The backend factory maps a backend name to a builder ``build(section, *, profile, seed,
-options) -> Robot`` (see :data:`BACKENDS`); the section is passed still as a
-:class:`~mmexec.config.yamlload.YDict` so the builder can report positions.
+The keys a config may have follow the registry of backends
+(:data:`mmexec.executive.backends.BACKENDS`): ``backend`` names one of them and each has
+its section. The named backend's :class:`~mmexec.drivers.backendspec.BackendSpec` is
+loaded with the config (:attr:`LoadedConfig.spec`) and answers every question about it:
+its section's files are checked here, :func:`build_robot` calls its builder with the
+section still as a :class:`~mmexec.config.yamlload.YDict` so it can report positions.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import hashlib
 import importlib
 import logging
 import os
 import sys
-from collections.abc import Callable, Mapping, Sequence
+import typing
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -45,17 +51,17 @@ from mmexec.config.yamlload import (
     load_yaml_bytes,
     read_file,
 )
+from mmexec.drivers.backendspec import CAPABILITIES, BackendSpec
 from mmexec.drivers.interfaces import Robot
+from mmexec.executive.backends import backend_spec, names, specs
 from mmexec.skills.base import REGISTRY, SkillRegistry
 
 __all__ = [
-    "BACKENDS",
     "CAPABILITIES",
     "LoadedConfig",
     "RunConfig",
     "SkillsConfig",
     "add_import_paths",
-    "backend_builder",
     "build_robot",
     "check_options",
     "check_profile",
@@ -67,30 +73,14 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-BackendName = Literal["mock", "sim", "robot"]
-
-#: backend name -> ``module:function`` of its builder.
-BACKENDS: dict[str, str] = {
-    "mock": "mmexec.drivers.mock.backend:build",
-    "sim": "mmexec.sim.backend:build",
-    "robot": "mmexec.drivers.robot:build",
-}
-
-#: Run options (``mmexec run --gui / --record``) each backend honours; asking a backend
-#: for one it cannot honour is an input error, not silently ignored.
-BACKEND_OPTIONS: dict[str, frozenset[str]] = {
-    "mock": frozenset(),
-    "sim": frozenset({"gui", "record"}),
-    "robot": frozenset(),
-}
-#: option -> (its command-line flag, what it does)
+#: Run option (``mmexec run --gui / --record``, :data:`~mmexec.drivers.backendspec.OPTIONS`)
+#: -> (its command-line flag, what it does). Each backend declares the options it honours
+#: (:attr:`BackendSpec.options`); asking a backend for one it cannot honour is an input
+#: error, not silently ignored.
 _OPTION_FLAGS: dict[str, tuple[str, str]] = {
     "gui": ("--gui", "the simulator window"),
     "record": ("--record", "a video of the simulation"),
 }
-
-#: Capability attribute names of :class:`~mmexec.drivers.interfaces.Robot`.
-CAPABILITIES: tuple[str, ...] = ("base", "arm", "gripper", "camera", "lidar")
 
 #: Modules that define the built-in skills, imported before any user module: the
 #: primitives, operator prompts, the general skill library, the fetch mission's own.
@@ -117,15 +107,14 @@ class SkillsConfig:
 
 @dataclass(frozen=True)
 class RunConfig:
-    """A run config file (see the module doc)."""
+    """A run config file (see the module doc), without its backend sections (the selected
+    one is :meth:`LoadedConfig.section`, bound by the backend itself)."""
 
-    backend: BackendName
+    #: the backend to run on: a name of :data:`mmexec.executive.backends.BACKENDS`
+    backend: str
     rate_hz: float = 20.0
     profile: dict[str, Any] = field(default_factory=dict)
     skills: SkillsConfig = field(default_factory=SkillsConfig)
-    mock: Any = None
-    sim: Any = None
-    robot: Any = None
     #: ``mmexec serve`` settings (token file, CORS origins, body cap, stream rates), bound
     #: by :func:`mmexec.executive.serve.settings.parse_section`
     serve: Any = None
@@ -139,14 +128,32 @@ class RunConfig:
         return []
 
 
+@functools.cache
+def _file_schema(backends: tuple[str, ...]) -> type:
+    """The dataclass a config file binds to: :class:`RunConfig`'s keys in order, with
+    ``backend`` one of ``backends`` and a section (any mapping, bound later by its backend)
+    per backend name after ``skills``, so unknown keys, hints and the ``backend`` choices
+    follow the registry."""
+    hints = typing.get_type_hints(RunConfig)
+    fields: list[tuple[str, Any, Any]] = []
+    for f in dataclasses.fields(RunConfig):
+        kind = Literal[backends] if f.name == "backend" else hints[f.name]
+        fields.append((f.name, kind, field(default=f.default, default_factory=f.default_factory)))
+        if f.name == "skills":
+            fields.extend((name, Any, field(default=None)) for name in backends)
+    return dataclasses.make_dataclass("RunConfigFile", fields, frozen=True)
+
+
 @dataclass(frozen=True)
 class LoadedConfig:
-    """A bound config plus where it came from (path, sha256 of its bytes, raw YAML)."""
+    """A bound config plus where it came from (path, sha256 of its bytes, raw YAML) and
+    the spec of the backend it names."""
 
     path: Path
     sha256: str
     config: RunConfig
     raw: YDict
+    spec: BackendSpec[Any]
 
     @property
     def backend(self) -> str:
@@ -161,6 +168,21 @@ class LoadedConfig:
         """Where ``key``'s value is in the file (the file start if absent)."""
         return self.raw.value_mark(key)
 
+    def relocate(self, error: InputError) -> InputError:
+        """``error`` with the problems a backend could only place at ``<...>`` (it was
+        given no section) moved to the config's ``backend:``."""
+        where = self.mark("backend")
+        return InputError(Problem(where, p.message) if p.mark.file.startswith("<") else p for p in error.problems)
+
+    def capabilities(self) -> frozenset[str]:
+        """The capabilities the configured robot will have, found from the section alone
+        by the backend (:attr:`BackendSpec.capabilities`): nothing is opened, connected
+        or started. InputError for a bad section."""
+        try:
+            return self.spec.section_capabilities(self.section())
+        except InputError as e:
+            raise self.relocate(e) from None
+
     @property
     def roots(self) -> tuple[Path, ...]:
         """The config's ``roots:``, resolved against the config file's folder."""
@@ -172,10 +194,12 @@ class LoadedConfig:
         return tuple(Path(os.path.realpath(self.path.parent / p)) for p in self.config.skills.paths)
 
 
-def _check_paths(path: Path, cfg: RunConfig, raw: YDict, problems: Problems) -> None:
+def _check_paths(path: Path, cfg: RunConfig, raw: YDict, spec: BackendSpec[Any] | None, problems: Problems) -> None:
     """Each ``roots:`` entry is a folder; each ``skills.paths`` entry is a folder inside the
-    config's folder tree or a root; a sim ``world`` given as a path lies inside the
-    config's folder tree, trees/, sim/worlds/ or a root (it is never opened otherwise)."""
+    config's folder tree or a root; a file the backend's section names by path
+    (:attr:`BackendSpec.files`: the sim's ``world``) lies inside the config's folder tree,
+    the folder the backend ships such files in, trees/ or a root (it is never opened
+    otherwise)."""
     roots_raw = raw.get("roots")
     roots = [Path(os.path.realpath(path.parent / r)) for r in cfg.roots]
     for i, root in enumerate(roots):
@@ -191,17 +215,18 @@ def _check_paths(path: Path, cfg: RunConfig, raw: YDict, problems: Problems) -> 
                          f"({', '.join(map(str, own))}); name its folder in 'roots:' to allow it")
         elif not folder.is_dir():
             problems.add(mark, f"skills.paths[{i}]: {entry!r} is not a folder ({folder})")
-    world = cfg.sim.get("world") if cfg.backend == "sim" and isinstance(cfg.sim, dict) else None
-    # sim.world reads a value with a '/' or a .yaml/.yml ending as a path (from the
-    # current folder), anything else as the name of a shipped world
-    if isinstance(world, str) and ("/" in world or world.endswith((".yaml", ".yml"))):
+    section = raw.get(cfg.backend)
+    for file in spec.files if spec is not None and isinstance(section, YDict) else ():
+        value = section.get(file.key)
+        if not (isinstance(value, str) and file.is_path(value)):
+            continue
         from mmexec.executive.compiler import TREES_DIR
-        from mmexec.sim.world import WORLDS_DIR
 
-        allowed = (Path(os.path.realpath(path)).parent, WORLDS_DIR, TREES_DIR, *roots)
-        if not is_within(world, allowed):
-            problems.add(cfg.sim.value_mark("world"), f"sim.world: {world!r} is outside the folders a world may come "
-                         f"from ({', '.join(map(str, allowed))}); name its folder in 'roots:' to allow it")
+        allowed = (Path(os.path.realpath(path)).parent, *file.shipped, TREES_DIR, *roots)
+        if not is_within(value, allowed):
+            problems.add(section.value_mark(file.key), f"{cfg.backend}.{file.key}: {value!r} is outside the folders "
+                         f"{file.what} may come from ({', '.join(map(str, allowed))}); name its folder in 'roots:' "
+                         "to allow it")
 
 
 def load_config(path: str | Path) -> LoadedConfig:
@@ -212,19 +237,30 @@ def load_config(path: str | Path) -> LoadedConfig:
     name = str(path)
     if not isinstance(raw, YDict):
         raise InputError.at(getattr(raw, "mark", Mark(name, 1, 1)),
-                            "expected a mapping with at least 'backend: mock|sim|robot'")
+                            f"expected a mapping with at least 'backend: {'|'.join(names())}'")
     problems = Problems()
-    cfg = bind(RunConfig, raw, raw.mark, "", problems)
-    for key in BACKENDS:
+    bound = bind(_file_schema(names()), raw, raw.mark, "", problems)
+    cfg = None
+    if bound is not None:
+        cfg = RunConfig(**{f.name: getattr(bound, f.name) for f in dataclasses.fields(RunConfig)})
+        for message in cfg.validate():
+            problems.add(raw.mark, message)
+    for key in names():
         value = raw.get(key)
         if value is not None and not isinstance(value, YDict):
             problems.add(raw.value_mark(key), f"{key}: expected a mapping of backend options, got {value!r}")
     problems.raise_if_any()
-    assert isinstance(cfg, RunConfig)
-    _check_paths(p, cfg, raw, problems)
+    assert cfg is not None
+    spec: BackendSpec[Any] | None = None
+    try:
+        spec = backend_spec(cfg.backend, raw.value_mark("backend"))
+    except InputError as e:
+        problems.extend(e.problems)
+    _check_paths(p, cfg, raw, spec, problems)
     problems.raise_if_any()
+    assert spec is not None
     digest = hashlib.sha256(data).hexdigest()
-    return LoadedConfig(p, digest, cfg, raw)
+    return LoadedConfig(p, digest, cfg, raw, spec)
 
 
 def load_skill_modules(loaded: LoadedConfig | None, registry: SkillRegistry = REGISTRY, *,
@@ -293,46 +329,20 @@ def check_profile(loaded: LoadedConfig) -> None:
         raise InputError(problems)
 
 
-def backend_builder(name: str, mark: Mark) -> Callable[..., Robot]:
-    """The builder function for backend ``name``; InputError (at ``mark``) when the
-    backend is unknown or its module is not part of this installation."""
-    target = BACKENDS.get(name)
-    if target is None:
-        raise InputError.at(mark, f"backend: unknown backend {name!r} (expected one of: {', '.join(BACKENDS)})")
-    module_name, func = target.split(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as e:
-        if e.name and (module_name == e.name or module_name.startswith(e.name + ".")):
-            raise InputError.at(
-                mark, f"backend: {name!r} is not available in this installation (module {module_name} not found)"
-            ) from None
-        raise InputError.at(
-            mark, f"backend: {name!r} cannot load: {module_name} needs {e.name!r}, which is not installed"
-        ) from None
-    builder = getattr(module, func, None)
-    if not callable(builder):
-        raise InputError.at(mark, f"backend: {name!r} is not available: {module_name} has no {func}()")
-    return builder  # type: ignore[no-any-return]
-
-
 def build_robot(
     loaded: LoadedConfig, *, seed: int | None = None, options: Mapping[str, Any] | None = None
 ) -> Robot:
-    """Build the configured backend. InputError for a bad section or missing backend;
-    exceptions of the backend itself (a port that will not open) propagate."""
-    builder = backend_builder(loaded.backend, loaded.mark("backend"))
+    """Build the configured backend (:attr:`BackendSpec.build`). InputError for a bad
+    section or a run option the backend cannot honour; exceptions of the backend itself (a
+    port that will not open) propagate."""
     opts = {"gui": False, "record": None}
     opts.update(options or {})
     check_options(loaded, opts)
     try:
-        robot = builder(loaded.section(), profile=dict(loaded.config.profile), seed=seed, options=opts)
+        robot = loaded.spec.build(loaded.section(), profile=dict(loaded.config.profile), seed=seed, options=opts)
     except InputError as e:
         # a builder given no section (None) cannot know the file: point at `backend:`
-        where = loaded.mark("backend")
-        raise InputError(
-            Problem(where, p.message) if p.mark.file.startswith("<") else p for p in e.problems
-        ) from None
+        raise loaded.relocate(e) from None
     if not isinstance(robot, Robot):
         raise TypeError(f"backend {loaded.backend!r} builder returned {type(robot).__name__}, not a Robot")
     return robot
@@ -340,14 +350,15 @@ def build_robot(
 
 def check_options(loaded: LoadedConfig, options: Mapping[str, Any]) -> None:
     """InputError at the config's ``backend:`` for each run option set in ``options``
-    (``gui`` true, ``record`` a path) that the backend does not honour (:data:`BACKEND_OPTIONS`)."""
-    honoured = BACKEND_OPTIONS.get(loaded.backend, frozenset())
+    (``gui`` true, ``record`` a path) that the backend does not honour
+    (:attr:`BackendSpec.options`), naming the backends that do."""
     problems = Problems()
     for name, (flag, what) in _OPTION_FLAGS.items():
-        if options.get(name) and name not in honoured:
-            able = [b for b, opts in BACKEND_OPTIONS.items() if name in opts]
+        if options.get(name) and name not in loaded.spec.options:
+            able = [spec.name for spec in specs(loaded.mark("backend")) if name in spec.options]
             problems.add(loaded.mark("backend"), f"backend: {loaded.backend!r} cannot honour {flag} ({what}; only "
-                         f"backend {', '.join(map(repr, able))} can): run without it or use a sim config")
+                         f"backend {', '.join(map(repr, able))} can): run without it or use a "
+                         f"{' or '.join(able)} config")
     problems.raise_if_any()
 
 

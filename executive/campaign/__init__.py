@@ -13,9 +13,10 @@ so every trial is reproducible alone with the command recorded in ``DIR/trials.c
   ``sha256(b"mmexec-campaign:<S>:<i>")``: independent-looking 32-bit seeds, stable across
   Python and numpy versions, computable by hand.
 * :mod:`.faults`: ``DIR/config.yaml`` is the config with a fault profile applied (the
-  built-in :data:`FAULT_PROFILES` or a profile file; JSON-merge-patch semantics,
-  :func:`merge_patch`) and, for the sim, ``randomize: true`` so each trial draws its
-  world from the world's randomisation ranges with its seed.
+  built-in :data:`BUILTIN_PROFILES`, with the patches each backend declares, or a profile
+  file; JSON-merge-patch semantics, :func:`merge_patch`) and, for a backend that draws its
+  world per trial (the sim), ``randomize: true`` so each trial draws its world from the
+  world's randomisation ranges with its seed.
 * :mod:`.requests`: fixed requests (``--request``/``--requests``, the same for every
   trial) or drawn ones (``--draw FIELD=V1,V2,...`` or ``FIELD=@markers``, the marker
   ids of the sim world's items): trial ``i`` draws with ``random.Random(SEED_i)``.
@@ -38,9 +39,10 @@ from __future__ import annotations
 
 from mmexec.executive.campaign.cli import add_campaign_parser, cmd_campaign
 from mmexec.executive.campaign.faults import (
-    FAULT_PROFILES,
+    BUILTIN_PROFILES,
     FaultProfile,
     apply_fault_profile,
+    builtin_profile,
     load_fault_profile,
     merge_patch,
 )
@@ -51,7 +53,7 @@ from mmexec.executive.campaign.seeds import trial_seed
 from mmexec.executive.campaign.trial import TrialResult, TrialSpec, parse_trial_log
 
 __all__ = [
-    "FAULT_PROFILES",
+    "BUILTIN_PROFILES",
     "Campaign",
     "CampaignOptions",
     "FaultProfile",
@@ -60,6 +62,7 @@ __all__ = [
     "TrialSpec",
     "add_campaign_parser",
     "apply_fault_profile",
+    "builtin_profile",
     "cmd_campaign",
     "load_fault_profile",
     "merge_patch",

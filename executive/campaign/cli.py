@@ -9,9 +9,9 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from mmexec.config.yamlload import InputError, Mark, Problem, YDict, YList, load_yaml
-from mmexec.executive.campaign.faults import FAULT_PROFILES
+from mmexec.executive.campaign.faults import BUILTIN_PROFILES
 from mmexec.executive.campaign.jsondata import plain
-from mmexec.executive.campaign.pools import import_ray
+from mmexec.executive.campaign.pools import import_ray, quiet_import_pybullet
 from mmexec.executive.campaign.requests import RequestPlan, parse_draws
 from mmexec.executive.campaign.run import CampaignOptions, run_campaign
 from mmexec.executive.runner import ArgMark
@@ -33,7 +33,7 @@ def add_campaign_parser(sub: Any) -> None:
     c.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                    help="run trials as Ray tasks: on the cluster at ADDRESS, or a local Ray instance")
     c.add_argument("--faults", default="config", metavar="PROFILE",
-                   help=f"fault profile: {', '.join(FAULT_PROFILES)} or a profile .yaml file (default config)")
+                   help=f"fault profile: {', '.join(BUILTIN_PROFILES)} or a profile .yaml file (default config)")
     c.add_argument("--no-recovery", action="store_true", help="disable every recovery node (ablation)")
     c.add_argument("--no-randomize", action="store_true", help="sim: keep the world's nominal poses")
     c.add_argument("--request", action="append", nargs="+", default=[], metavar="K=V",
@@ -84,6 +84,7 @@ def cmd_campaign(args: argparse.Namespace, *, out: TextIO | None = None,
     if args.draw:
         if fixed:
             raise InputError.at(ArgMark("--draw", 1, 1), "use either --draw or --request/--requests, not both")
+        quiet_import_pybullet()  # loading a sim config imports its backend, which imports pybullet
         draws = parse_draws(args.draw, plain(load_config(args.config).raw))
     if args.requests_per_trial < 1:
         raise InputError.at(ArgMark("--requests-per-trial", 0, 0), "expected at least 1")

@@ -1,8 +1,13 @@
 """Fault profiles (``mmexec campaign --faults``): named sets of RFC 7396 merge patches
 for a run config's backend section. ``DIR/config.yaml`` is the user's config with one
 profile applied (:func:`apply_fault_profile`); the built-in profiles are
-:data:`FAULT_PROFILES`, anything else is a profile file (:func:`load_fault_profile`).
-docs/campaigns.md has the table of built-in profiles."""
+:data:`BUILTIN_PROFILES`, anything else is a profile file (:func:`load_fault_profile`).
+docs/campaigns.md has the table of built-in profiles.
+
+Each backend declares its own patches (:class:`~mmexec.drivers.backendspec.BackendSpec`):
+``faults_off`` switches every injected fault of its section off, ``fault_patches[NAME]``
+is what built-in profile NAME adds on top, and ``randomize_key`` is the section key set
+to draw the world per trial. Nothing here knows a backend by name."""
 
 from __future__ import annotations
 
@@ -13,10 +18,12 @@ from pathlib import Path
 from typing import Any
 
 from mmexec.config.yamlload import InputError, Mark, Problem, YDict, load_yaml
+from mmexec.executive.backends import backend_spec, names, specs
 from mmexec.executive.campaign.jsondata import plain
 from mmexec.executive.runner import ArgMark
 
-__all__ = ["FAULT_PROFILES", "NOMINAL", "FaultProfile", "apply_fault_profile", "load_fault_profile", "merge_patch"]
+__all__ = ["AS_WRITTEN", "BUILTIN_PROFILES", "NOMINAL", "FaultProfile", "apply_fault_profile", "builtin_profile",
+           "load_fault_profile", "merge_patch"]
 
 
 def merge_patch(target: Any, patch: Any) -> Any:
@@ -48,51 +55,41 @@ class FaultProfile:
     source: str = "built-in"
 
 
-#: Patches that switch every injected fault off (the ``nominal`` profile's content).
-NOMINAL: dict[str, dict[str, Any]] = {
-    "sim": {"faults": None},
-    "mock": {"arm": {"fail_moves": None}, "gripper": {"grasps": None, "fault_moves": None},
-             "base": {"blocked": None}, "camera": {"dropouts": None}},
+#: The built-in profile that runs the config exactly as written (the default), on every
+#: backend, and the one that starts every other built-in profile: every fault off.
+AS_WRITTEN, NOMINAL = "config", "nominal"
+
+#: Built-in fault profiles (``--faults NAME``) and what each does. Each but ``config``
+#: starts from ``nominal`` (the backend's ``faults_off`` patch: every fault of the config
+#: off, noise as configured) and adds the backend's patch of that name
+#: (``fault_patches``); a backend with neither cannot run the profile.
+BUILTIN_PROFILES: dict[str, str] = {
+    AS_WRITTEN: "the config's own faults section, unchanged",
+    NOMINAL: "no injected faults; sensor and odometry noise as configured",
+    "arm_fail_first": "the first arm attempt fails (sim: the first arm goal stops half-way and fails; "
+                      "mock: the first grasp closes on nothing)",
+    "arm_fail_second": "the second arm attempt fails (sim: arm goal 2, in fetch_item the pick's first move "
+                       "after the initial tuck; mock: the second grasp)",
+    "arm_fail_twice": "the first two arm attempts fail (sim: arm goals 1 and 2; mock: grasps 1 and 2)",
+    "arm_fail_always": "every arm attempt fails (sim: every arm goal; mock: every grasp)",
+    "sensor_dropout": "camera frames and lidar scans are missing with probability 0.2 (sim only)",
+    "nav_blocked": "the base cannot move (mock only; for the sim name the items in a profile file: "
+                   "sim: {faults: {nav_blocked: [box_3]}})",
 }
 
 
-def _profile(name: str, description: str, **specific: dict[str, Any]) -> FaultProfile:
-    """Nominal plus one fault, for the backends that ``specific`` names (all backends
-    with a nominal patch when it names none)."""
-    backends = list(specific) or list(NOMINAL)
-    patches = {b: (NOMINAL[b],) + ((specific[b],) if b in specific else ()) for b in backends}
-    return FaultProfile(name, description, patches)
-
-
-#: Built-in fault profiles (``--faults NAME``). Each starts from ``nominal`` (every fault
-#: of the config off, noise as configured) and adds one fault. ``config`` (the default)
-#: runs the config exactly as written.
-FAULT_PROFILES: dict[str, FaultProfile] = {
-    "config": FaultProfile("config", "the config's own faults section, unchanged",
-                           {"sim": (), "mock": (), "robot": ()}),
-    "nominal": _profile("nominal", "no injected faults; sensor and odometry noise as configured"),
-    "arm_fail_first": _profile(
-        "arm_fail_first", "the first arm attempt fails (sim: the first arm goal stops half-way and fails; "
-                          "mock: the first grasp closes on nothing)",
-        sim={"faults": {"arm_fail_attempts": [1]}}, mock={"gripper": {"grasps": [False]}}),
-    "arm_fail_second": _profile(
-        "arm_fail_second", "the second arm attempt fails (sim: arm goal 2, in fetch_item the pick's first move "
-                           "after the initial tuck; mock: the second grasp)",
-        sim={"faults": {"arm_fail_attempts": [2]}}, mock={"gripper": {"grasps": [True, False]}}),
-    "arm_fail_twice": _profile(
-        "arm_fail_twice", "the first two arm attempts fail (sim: arm goals 1 and 2; mock: grasps 1 and 2)",
-        sim={"faults": {"arm_fail_attempts": [1, 2]}}, mock={"gripper": {"grasps": [False, False]}}),
-    "arm_fail_always": _profile(
-        "arm_fail_always", "every arm attempt fails (sim: every arm goal; mock: every grasp)",
-        sim={"faults": {"arm_fail": "always"}}, mock={"gripper": {"default_grasp": False}}),
-    "sensor_dropout": _profile(
-        "sensor_dropout", "camera frames and lidar scans are missing with probability 0.2 (sim only)",
-        sim={"faults": {"camera_dropout": {"p": 0.2}, "lidar_dropout": {"p": 0.2}}}),
-    "nav_blocked": _profile(
-        "nav_blocked", "the base cannot move (mock only; for the sim name the items in a profile file: "
-                       "sim: {faults: {nav_blocked: [box_3]}})",
-        mock={"base": {"blocked": True}}),
-}
+def builtin_profile(name: str) -> FaultProfile:
+    """Built-in profile ``name`` (a key of :data:`BUILTIN_PROFILES`) with the patches of
+    every registered backend that can run it (each backend module is imported)."""
+    patches: dict[str, tuple[Mapping[str, Any], ...]] = {}
+    for spec in specs(ArgMark("--faults", 0, 0)):
+        if name == AS_WRITTEN:
+            patches[spec.name] = ()
+        elif spec.faults_off is not None and name == NOMINAL:
+            patches[spec.name] = (spec.faults_off,)
+        elif spec.faults_off is not None and name in spec.fault_patches:
+            patches[spec.name] = (spec.faults_off, spec.fault_patches[name])
+    return FaultProfile(name, BUILTIN_PROFILES[name], patches)
 
 
 def load_fault_profile(name_or_path: str) -> FaultProfile:
@@ -100,18 +97,18 @@ def load_fault_profile(name_or_path: str) -> FaultProfile:
     ``description``, ``base: nominal|config`` (start from every fault off, the default,
     or from the config as written) and one merge patch per backend name (``sim:``,
     ``mock:``). InputError naming ``--faults`` or ``FILE:LINE:COL`` otherwise."""
-    if name_or_path in FAULT_PROFILES:
-        return FAULT_PROFILES[name_or_path]
+    if name_or_path in BUILTIN_PROFILES:
+        return builtin_profile(name_or_path)
     path = Path(name_or_path)
     if not (path.suffix in (".yaml", ".yml") or path.exists()):
         raise InputError.at(ArgMark("--faults", 0, 0), f"unknown fault profile {name_or_path!r} (built-in: "
-                            f"{', '.join(FAULT_PROFILES)}; or a profile .yaml file)")
+                            f"{', '.join(BUILTIN_PROFILES)}; or a profile .yaml file)")
     raw = load_yaml(path)
     top = getattr(raw, "mark", Mark(str(path), 1, 1))
     if not isinstance(raw, YDict):
         raise InputError.at(top, "a fault profile is a mapping: {description: ..., sim: {faults: {...}}, mock: {...}}")
     problems: list[Problem] = []
-    allowed = {"description", "base", "sim", "mock", "robot"}
+    allowed = {"description", "base", *names()}
     for key in raw:
         if key not in allowed:
             problems.append(Problem(raw.key_mark(key) if hasattr(raw, "key_mark") else top,
@@ -123,7 +120,7 @@ def load_fault_profile(name_or_path: str) -> FaultProfile:
     if not isinstance(desc, str):
         problems.append(Problem(raw.value_mark("description"), "description: expected a string"))
     patches: dict[str, tuple[Mapping[str, Any], ...]] = {}
-    for backend in ("sim", "mock", "robot"):
+    for backend in names():
         if backend not in raw:
             continue
         value = raw[backend]
@@ -131,19 +128,21 @@ def load_fault_profile(name_or_path: str) -> FaultProfile:
             problems.append(Problem(raw.value_mark(backend), f"{backend}: expected a mapping (a merge patch "
                                                              f"of the config's {backend}: section)"))
             continue
-        start = (NOMINAL[backend],) if base == "nominal" and backend in NOMINAL else ()
-        patches[backend] = start + (plain(value),)
+        faults_off = backend_spec(backend, raw.key_mark(backend)).faults_off if base == NOMINAL else None
+        patches[backend] = ((faults_off,) if faults_off is not None else ()) + (plain(value),)
     if not patches and not problems:
-        problems.append(Problem(top, "a fault profile needs at least one backend patch (sim:, mock: or robot:)"))
+        keys = [f"{b}:" for b in names()]
+        problems.append(Problem(top, f"a fault profile needs at least one backend patch "
+                                     f"({', '.join(keys[:-1])} or {keys[-1]})"))
     if problems:
         raise InputError(problems)
     return FaultProfile(path.stem, str(desc), patches, source=str(path))
 
 
 def apply_fault_profile(raw_config: Mapping[str, Any], profile: FaultProfile, *, randomize: bool) -> dict[str, Any]:
-    """The config mapping with ``profile`` applied to its backend's section (and, for the
-    sim, ``randomize`` set). InputError at ``--faults`` when the profile has nothing
-    for the config's backend."""
+    """The config mapping with ``profile`` applied to its backend's section (and, for a
+    backend that draws its world per trial, its ``randomize_key`` set to ``randomize``).
+    InputError at ``--faults`` when the profile has nothing for the config's backend."""
     cfg = plain(raw_config)
     backend = str(cfg.get("backend", ""))
     if backend not in profile.patches:
@@ -152,8 +151,9 @@ def apply_fault_profile(raw_config: Mapping[str, Any], profile: FaultProfile, *,
     section = cfg.get(backend) or {}
     for patch in profile.patches[backend]:
         section = merge_patch(section, patch)
-    if backend == "sim":
-        section["randomize"] = randomize
+    randomize_key = backend_spec(backend, ArgMark("--faults", 0, 0)).randomize_key
+    if randomize_key is not None:
+        section[randomize_key] = randomize
     if section or backend in cfg:
         cfg[backend] = section
     return cfg

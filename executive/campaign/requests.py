@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from mmexec.config.yamlload import InputError, Mark, Problem
+from mmexec.executive.backends import backend_spec, specs
 from mmexec.executive.runner import ArgMark
 
 __all__ = ["RequestPlan", "cli_value", "parse_draws"]
@@ -49,12 +50,15 @@ def cli_value(value: Any) -> str:
 
 
 def world_markers(cfg: Mapping[str, Any], mark: Mark) -> tuple[int, ...]:
-    if cfg.get("backend") != "sim":
-        raise InputError.at(mark, "@markers needs a sim config (the marker ids of the world's items)")
-    from mmexec.sim.world import load_world
-
-    world = load_world(str((cfg.get("sim") or {}).get("world", "lab")))
-    return tuple(it.marker for it in world.spec.items)
+    """The marker ids of the items of the world the config's backend runs in
+    (:attr:`~mmexec.drivers.backendspec.BackendSpec.item_markers`); InputError at ``mark``
+    for a backend without such a world."""
+    backend = str(cfg.get("backend", ""))
+    item_markers = backend_spec(backend, mark).item_markers
+    if item_markers is None:
+        able = [spec.name for spec in specs(mark) if spec.item_markers is not None]
+        raise InputError.at(mark, f"@markers needs a {' or '.join(able)} config (the marker ids of the world's items)")
+    return item_markers(cfg.get(backend))
 
 
 def parse_draws(tokens: Sequence[str], cfg: Mapping[str, Any]) -> dict[str, tuple[Any, ...]]:

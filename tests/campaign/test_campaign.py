@@ -21,11 +21,11 @@ import pytest
 
 from mmexec.config.yamlload import InputError, load_yaml
 from mmexec.executive.campaign import (
-    FAULT_PROFILES,
     CampaignOptions,
     RequestPlan,
     TrialResult,
     apply_fault_profile,
+    builtin_profile,
     load_fault_profile,
     merge_patch,
     run_campaign,
@@ -125,21 +125,21 @@ def test_merge_patch_semantics() -> None:
 
 def test_fault_profiles_overlay_the_backend_section() -> None:
     cfg = {"backend": "sim", "sim": {"world": "lab", "faults": {"marker_bias": {"box_2": [0.02, 0.0]}}}}
-    nominal = apply_fault_profile(cfg, FAULT_PROFILES["nominal"], randomize=True)
+    nominal = apply_fault_profile(cfg, builtin_profile("nominal"), randomize=True)
     assert nominal["sim"] == {"world": "lab", "randomize": True}
-    first = apply_fault_profile(cfg, FAULT_PROFILES["arm_fail_first"], randomize=False)
+    first = apply_fault_profile(cfg, builtin_profile("arm_fail_first"), randomize=False)
     assert first["sim"] == {"world": "lab", "faults": {"arm_fail_attempts": [1]}, "randomize": False}
-    second = apply_fault_profile(cfg, FAULT_PROFILES["arm_fail_second"], randomize=True)
+    second = apply_fault_profile(cfg, builtin_profile("arm_fail_second"), randomize=True)
     assert second["sim"]["faults"] == {"arm_fail_attempts": [2]}
-    as_is = apply_fault_profile(cfg, FAULT_PROFILES["config"], randomize=True)
+    as_is = apply_fault_profile(cfg, builtin_profile("config"), randomize=True)
     assert as_is["sim"]["faults"] == {"marker_bias": {"box_2": [0.02, 0.0]}}
     mock = {"backend": "mock", "mock": {"gripper": {"grasps": [False], "object_width": 0.03}}}
-    assert apply_fault_profile(mock, FAULT_PROFILES["nominal"], randomize=True)["mock"] == \
+    assert apply_fault_profile(mock, builtin_profile("nominal"), randomize=True)["mock"] == \
         {"gripper": {"object_width": 0.03}, "arm": {}, "base": {}, "camera": {}}  # RFC 7396 keeps empty objects
-    assert apply_fault_profile(mock, FAULT_PROFILES["arm_fail_first"], randomize=True)["mock"]["gripper"] == \
+    assert apply_fault_profile(mock, builtin_profile("arm_fail_first"), randomize=True)["mock"]["gripper"] == \
         {"object_width": 0.03, "grasps": [False]}
     with pytest.raises(InputError, match=r"^--faults: fault profile 'sensor_dropout' has no patch for backend 'mock'"):
-        apply_fault_profile(mock, FAULT_PROFILES["sensor_dropout"], randomize=True)
+        apply_fault_profile(mock, builtin_profile("sensor_dropout"), randomize=True)
 
 
 def test_fault_profile_files_and_errors(tmp_path: Path) -> None:

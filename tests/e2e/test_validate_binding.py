@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from mmexec.executive import cli
 from mmexec.executive.config import load_config
 
 MISSION = "trees/fetch_item.yaml"
@@ -29,17 +28,19 @@ def test_fetch_mission_binds_to_every_shipped_config(run_cli, repo_root: Path, c
 
 
 def test_real_robot_capabilities_come_from_the_plan_not_from_devices(repo_root: Path, monkeypatch) -> None:
+    import dataclasses
+
     import mmexec.drivers.robot as robot_backend
     import mmexec.executive.config as config_mod
 
     def no_build(*a, **k):
         raise AssertionError("validate must not build (open) the real robot")
 
-    monkeypatch.setattr(robot_backend, "build", no_build)
+    monkeypatch.setattr(robot_backend, "BACKEND", dataclasses.replace(robot_backend.BACKEND, build=no_build))
     monkeypatch.setattr(config_mod, "build_robot", no_build)
     for config in ("config/locobot.yaml", "config/ur5e.yaml"):
         loaded = load_config(repo_root / config)
-        caps = cli.binding_capabilities(loaded)
+        caps = loaded.capabilities()
         assert caps >= {"base", "arm", "gripper", "camera"}, config
         assert caps == {line.split(":")[0] for line in robot_backend.check(loaded.section())}, config
 
@@ -47,7 +48,7 @@ def test_real_robot_capabilities_come_from_the_plan_not_from_devices(repo_root: 
 def test_mock_capabilities_follow_its_section(tmp_path: Path) -> None:
     c = tmp_path / "c.yaml"
     c.write_text("backend: mock\nmock:\n  capabilities: [arm, gripper]\n")
-    assert cli.binding_capabilities(load_config(c)) == {"arm", "gripper"}
+    assert load_config(c).capabilities() == {"arm", "gripper"}
 
 
 def test_a_robot_without_a_base_is_one_line_per_leaf_and_exit_2(run_cli, repo_root: Path, tmp_path: Path) -> None:

@@ -10,7 +10,6 @@ import pytest
 from mmexec.config.yamlload import InputError, Mark
 from mmexec.drivers.mock import MockRobot
 from mmexec.executive.config import (
-    backend_builder,
     build_robot,
     load_config,
     load_skill_modules,
@@ -75,16 +74,20 @@ def test_backend_section_errors_reach_user(tmp_path: Path) -> None:
         build_robot(loaded)
 
 
-def test_missing_backend_module_is_one_line_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    import mmexec.executive.config as config_mod
+def test_missing_backend_module_is_one_line_error(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    from mmexec.executive import backends
 
-    monkeypatch.setitem(config_mod.BACKENDS, "robot", "mmexec.drivers.not_built_yet_xyz:build")
+    monkeypatch.setitem(backends.BACKENDS, "robot", "mmexec.drivers.not_built_yet_xyz")
     with pytest.raises(InputError) as ei:
-        backend_builder("robot", Mark("c.yaml", 1, 10))
+        backends.backend_spec("robot", Mark("c.yaml", 1, 10))
     assert str(ei.value) == ("c.yaml:1:10: backend: 'robot' is not available in this installation "
                              "(module mmexec.drivers.not_built_yet_xyz not found)")
+    with pytest.raises(InputError) as ei:
+        load_config(write(tmp_path, "backend: robot\n"))  # found when the config loads
+    assert str(ei.value) == (f"{tmp_path / 'cfg.yaml'}:1:10: backend: 'robot' is not available in this "
+                             "installation (module mmexec.drivers.not_built_yet_xyz not found)")
     with pytest.raises(InputError, match="unknown backend 'ros'"):
-        backend_builder("ros", Mark("c.yaml", 1, 10))
+        backends.backend_spec("ros", Mark("c.yaml", 1, 10))
 
 
 def test_skill_modules_import_and_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
