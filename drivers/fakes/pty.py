@@ -31,9 +31,9 @@ import time
 import tty
 from collections.abc import Callable
 from types import FrameType
-from typing import Self
+from typing import Protocol, Self
 
-__all__ = ["PtyDevice", "serve_until_signal"]
+__all__ = ["PtyDevice", "Servable", "serve_until_signal"]
 
 log = logging.getLogger(__name__)
 
@@ -176,10 +176,22 @@ class PtyDevice:
                             log.exception("%s: on_tick failed", self.name)
 
 
-def serve_until_signal(device: PtyDevice, announce: Callable[[str], None]) -> None:
-    """Start ``device``, hand its port to ``announce`` and serve until SIGINT or SIGTERM
-    (``mmexec hw fake``); then stop it and restore the previous handlers. Main thread only
-    (Python sets signal handlers there)."""
+class Servable(Protocol):
+    """What :func:`serve_until_signal` serves: a :class:`PtyDevice`, or any fake with
+    ``start``, ``stop`` and a ``port`` once started (e.g. a TCP server's port number)."""
+
+    @property
+    def port(self) -> str | int: ...
+
+    def start(self) -> object: ...
+
+    def stop(self) -> None: ...
+
+
+def serve_until_signal(device: Servable, announce: Callable[[str], None]) -> None:
+    """Start ``device``, hand its port (as text) to ``announce`` and serve until SIGINT or
+    SIGTERM (``mmexec hw fake``); then stop it and restore the previous handlers. Main thread
+    only (Python sets signal handlers there)."""
     done = threading.Event()
 
     def _on_signal(signum: int, frame: FrameType | None) -> None:
@@ -188,7 +200,7 @@ def serve_until_signal(device: PtyDevice, announce: Callable[[str], None]) -> No
     old = {s: signal.signal(s, _on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         device.start()
-        announce(device.port)
+        announce(str(device.port))
         while not done.wait(0.5):
             pass
     finally:

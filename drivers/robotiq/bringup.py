@@ -27,11 +27,8 @@ Exit status, with at most one line on stderr naming the device, the port and the
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 import time
-from types import FrameType
 
 from mmexec.drivers.interfaces import GoalState
 from mmexec.drivers.robotiq import codec
@@ -215,6 +212,7 @@ def add_fake_arguments(parser: argparse.ArgumentParser) -> None:
 def run_fake(args: argparse.Namespace) -> int:
     """Start a fake gripper, print its port (``/dev/pts/N`` or ``127.0.0.1:PORT``) and
     serve until SIGINT / SIGTERM."""
+    from mmexec.drivers.fakes.pty import serve_until_signal
     from mmexec.drivers.fakes.robotiq import FakeRobotiq, FakeURCap, GripperModel
 
     model = GripperModel(activation_time=args.activation_time, time_scale=args.time_scale,
@@ -229,26 +227,12 @@ def run_fake(args: argparse.Namespace) -> int:
         if getattr(args, flag) < 0:
             print(f"robotiq fake: --{flag.replace('_', '-')} must be >= 0", file=sys.stderr)
             return 2
-    stop = threading.Event()
-
-    def on_signal(signum: int, frame: FrameType | None) -> None:
-        stop.set()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        if args.urcap:
-            with FakeURCap(model, port=args.tcp_port) as server:
-                server.drop_every, server.garble_every = args.drop_every, args.corrupt_every
-                print(f"127.0.0.1:{server.port}", flush=True)
-                while not stop.wait(0.2):
-                    pass
-        else:
-            with FakeRobotiq(model) as fake:
-                fake.drop_every, fake.corrupt_every = args.drop_every, args.corrupt_every
-                print(fake.port, flush=True)
-                while not stop.wait(0.2):
-                    pass
-    finally:
-        for s, handler in old.items():
-            signal.signal(s, handler)
+    if args.urcap:
+        server = FakeURCap(model, port=args.tcp_port)
+        server.drop_every, server.garble_every = args.drop_every, args.corrupt_every
+        serve_until_signal(server, lambda port: print(f"127.0.0.1:{port}", flush=True))
+    else:
+        fake = FakeRobotiq(model)
+        fake.drop_every, fake.corrupt_every = args.drop_every, args.corrupt_every
+        serve_until_signal(fake, lambda port: print(port, flush=True))
     return 0
