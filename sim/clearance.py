@@ -20,7 +20,7 @@ import math
 import cv2
 import numpy as np
 
-from mmexec.sim.world import World
+from mmexec.sim.world import World, footprint_mask, room_grid
 
 __all__ = ["ClearanceMap"]
 
@@ -42,24 +42,16 @@ class ClearanceMap:
             raise ValueError(f"resolution must be > 0, got {resolution}")
         r = world.spec.room
         t = r.wall_thickness + 0.05
-        ox, oy = -t, -t
-        w = math.ceil((r.size[0] + 2 * t) / resolution)
-        h = math.ceil((r.size[1] + 2 * t) / resolution)
-        xs = ox + (np.arange(w) + 0.5) * resolution
-        ys = oy + (np.arange(h) + 0.5) * resolution
-        X, Y = np.meshgrid(xs, ys)
-        free = np.ones((h, w), dtype=np.uint8)
+        X, Y = room_grid(r, t, resolution)
+        free = np.ones(X.shape, dtype=np.uint8)
         grow = resolution * math.sqrt(2.0) / 2
         for _, T, size, _kind in world.static_boxes():
             lo, hi = T[2, 3] - size[2] / 2, T[2, 3] + size[2] / 2
             if hi < z_min or lo > z_max:
                 continue
-            dx, dy = X - T[0, 3], Y - T[1, 3]
-            lx = T[0, 0] * dx + T[1, 0] * dy
-            ly = T[0, 1] * dx + T[1, 1] * dy
-            free[(np.abs(lx) <= size[0] / 2 + grow) & (np.abs(ly) <= size[1] / 2 + grow)] = 0
+            free[footprint_mask(X, Y, T, size, grow)] = 0
         dist = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(np.float32) * resolution
-        return cls(dist, resolution, (ox, oy))
+        return cls(dist, resolution, (-t, -t))
 
     def lower_bound(self, x: float, y: float) -> float:
         """A distance [m] that the static geometry is at least away from (x, y); 0 outside

@@ -44,7 +44,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from mmexec.sim.world import Obstacle, Person, World
+from mmexec.sim.world import Obstacle, Person, World, footprint_mask, room_grid
 
 __all__ = [
     "Clutter",
@@ -231,21 +231,15 @@ class _FreeSpace:
     bottom is below ``max_bottom`` [m]) or wall, and cell <-> map conversions."""
 
     def __init__(self, world: World, max_bottom: float = 1.0) -> None:
-        sx, sy = world.spec.room.size
-        self.w, self.h = math.ceil(sx / _RES), math.ceil(sy / _RES)
-        xs = (np.arange(self.w) + 0.5) * _RES
-        ys = (np.arange(self.h) + 0.5) * _RES
-        X, Y = np.meshgrid(xs, ys)
+        X, Y = room_grid(world.spec.room, 0.0, _RES)
+        self.h, self.w = X.shape
         free = np.ones((self.h + 2, self.w + 2), dtype=np.uint8)  # a ring of wall cells around the room
         free[0, :] = free[-1, :] = free[:, 0] = free[:, -1] = 0
         inner = free[1:-1, 1:-1]
         for _, T, size, _kind in world.static_boxes():
             if T[2, 3] - size[2] / 2 > max_bottom:
                 continue
-            dx, dy = X - T[0, 3], Y - T[1, 3]
-            lx = T[0, 0] * dx + T[1, 0] * dy
-            ly = T[0, 1] * dx + T[1, 1] * dy
-            inner[(np.abs(lx) <= size[0] / 2) & (np.abs(ly) <= size[1] / 2)] = 0
+            inner[footprint_mask(X, Y, T, size)] = 0
         d = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE).astype(np.float64) * _RES
         self.dist = d[1:-1, 1:-1] - 0.5 * _RES  # centre to the obstacle cell's edge
 

@@ -45,7 +45,9 @@ __all__ = [
     "Table",
     "World",
     "WorldSpec",
+    "footprint_mask",
     "load_world",
+    "room_grid",
     "shipped_worlds",
 ]
 
@@ -216,8 +218,9 @@ class Person:
     back to the first; two waypoints walk back and forth) at ``speed`` [m/s] and stands
     ``pause`` [s] at each waypoint. It starts at the first waypoint after ``delay`` [s]
     of clock time and, when ``trigger`` [m] is given, not before the robot's true position
-    has come within that distance of it. A person never steps closer than 0.1 m to the
-    robot's footprint (they wait), so a contact is the robot's doing."""
+    has come within that distance of it. A person never steps closer than 0.3 m to the
+    robot's footprint (they wait, and after 3 s walk their loop the other way), so a
+    contact is the robot's doing (:mod:`mmexec.sim.people`)."""
 
     name: str
     waypoints: tuple[tuple[float, float], ...]
@@ -406,24 +409,39 @@ class World:
             raise ValueError(f"resolution must be > 0, got {resolution}")
         r = self.spec.room
         t = r.wall_thickness
-        ox, oy = -t, -t
-        w = math.ceil((r.size[0] + 2 * t) / resolution)
-        h = math.ceil((r.size[1] + 2 * t) / resolution)
-        xs = ox + (np.arange(w) + 0.5) * resolution
-        ys = oy + (np.arange(h) + 0.5) * resolution
-        X, Y = np.meshgrid(xs, ys)
-        data = np.zeros((h, w), dtype=np.int8)
+        X, Y = room_grid(r, t, resolution)
+        data = np.zeros(X.shape, dtype=np.int8)
         data[(X < 0) | (Y < 0) | (X > r.size[0]) | (Y > r.size[1])] = 100
         hidden = self.unmapped_names()
         for name, T, size, _kind in self.static_boxes():
             if T[2, 3] - size[2] / 2 > 0.5 or name in hidden:  # floats above anything the base can hit; unmapped
                 continue
-            dx, dy = X - T[0, 3], Y - T[1, 3]
-            lx = T[0, 0] * dx + T[1, 0] * dy
-            ly = T[0, 1] * dx + T[1, 1] * dy
-            inside = (np.abs(lx) <= size[0] / 2 + resolution / 2) & (np.abs(ly) <= size[1] / 2 + resolution / 2)
-            data[inside] = 100
-        return OccupancyGrid(data=data, resolution=resolution, origin=Pose2D(ox, oy, 0.0))
+            data[footprint_mask(X, Y, T, size, resolution / 2)] = 100
+        return OccupancyGrid(data=data, resolution=resolution, origin=Pose2D(-t, -t, 0.0))
+
+
+def room_grid(room: Room, margin: float, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """``X, Y`` [m] in ``map``: the cell centres of a grid of ``resolution`` [m/cell] over
+    ``room`` and ``margin`` [m] beyond it on every side (lower-left corner at
+    ``(-margin, -margin)``), rows along y, columns along x."""
+    w = math.ceil((room.size[0] + 2 * margin) / resolution)
+    h = math.ceil((room.size[1] + 2 * margin) / resolution)
+    xs = -margin + (np.arange(w) + 0.5) * resolution
+    ys = -margin + (np.arange(h) + 0.5) * resolution
+    X, Y = np.meshgrid(xs, ys)
+    return X, Y
+
+
+def footprint_mask(
+    X: np.ndarray, Y: np.ndarray, T: np.ndarray, size: tuple[float, float, float], grow: float = 0.0
+) -> np.ndarray:
+    """True where the point (X, Y) lies in the footprint of the box at ``T`` (``T_map_box``,
+    as :meth:`World.static_boxes` gives it) of full extents ``size``, grown by ``grow`` [m]
+    on every side."""
+    dx, dy = X - T[0, 3], Y - T[1, 3]
+    lx = T[0, 0] * dx + T[1, 0] * dy
+    ly = T[0, 1] * dx + T[1, 1] * dy
+    return (np.abs(lx) <= size[0] / 2 + grow) & (np.abs(ly) <= size[1] / 2 + grow)
 
 
 # --------------------------------------------------------------------------- loading
