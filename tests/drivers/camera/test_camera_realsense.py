@@ -5,10 +5,8 @@ intrinsics when the config gives none, start failure as one clear error."""
 from __future__ import annotations
 
 import sys
-import threading
 import time
 import types
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -86,16 +84,6 @@ def fake_rs(fail_start: bool = False) -> types.ModuleType:
 
     rs.config, rs.pipeline, rs.align = config, pipeline, align  # type: ignore[attr-defined]
     return rs
-
-
-@pytest.fixture(autouse=True)
-def no_leaked_threads() -> Iterator[None]:
-    baseline = threading.active_count()
-    yield
-    deadline = time.monotonic() + 2.0
-    while threading.active_count() > baseline and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert threading.active_count() == baseline
 
 
 def test_aligned_depth_in_metres(monkeypatch: pytest.MonkeyPatch) -> None:

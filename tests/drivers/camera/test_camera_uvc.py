@@ -6,7 +6,6 @@ import math
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
@@ -23,16 +22,6 @@ from mmexec.drivers.camera.config import (
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.camera.uvc import UVCCamera
 from mmexec.drivers.interfaces import ManualClock
-
-
-@pytest.fixture(autouse=True)
-def no_leaked_threads() -> Iterator[None]:
-    baseline = threading.active_count()
-    yield
-    deadline = time.monotonic() + 2.0
-    while threading.active_count() > baseline and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert threading.active_count() == baseline
 
 
 def wait_for(pred, timeout: float = 2.0) -> bool:  # type: ignore[no-untyped-def]
