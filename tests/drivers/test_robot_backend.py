@@ -4,12 +4,12 @@ positioned errors for bad sections, one-line errors for devices that do not answ
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
+from driverkit import wait_for
 
 from mmexec.config.yamlload import InputError
 from mmexec.drivers import robot as rb
@@ -17,15 +17,6 @@ from mmexec.drivers.fakes.kobuki import KobukiFake
 from mmexec.executive.config import build_robot, load_config
 
 REPO = Path(__file__).resolve().parents[2]
-
-
-def _wait(pred, timeout: float = 2.0) -> bool:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.005)
-    return bool(pred())
 
 
 @pytest.fixture
@@ -37,7 +28,7 @@ def fake() -> Iterator[KobukiFake]:
         yield f
     finally:
         f.stop()
-    assert _wait(lambda: threading.active_count() <= before)
+    assert wait_for(lambda: threading.active_count() <= before)
 
 
 def _config(tmp_path: Path, robot_section: str) -> Path:
@@ -64,10 +55,10 @@ def test_build_and_drive_kobuki_from_config(tmp_path: Path, fake: KobukiFake) ->
             robot.base.set_velocity(0.3, 0.0)
             robot.spin(0.02)
         assert robot.clock.now() - t0 == pytest.approx(0.2, abs=0.1)
-        assert _wait(lambda: fake.snapshot().speed == 300)
+        assert wait_for(lambda: fake.snapshot().speed == 300)
         assert robot.base.state().pose.x > 1.0
         robot.safe_stop()
-        assert _wait(lambda: fake.snapshot().speed == 0)
+        assert wait_for(lambda: fake.snapshot().speed == 0)
     finally:
         robot.close()
     assert robot.base.state().faults == frozenset()  # state still readable after close
@@ -78,9 +69,9 @@ def test_close_stops_a_moving_base(tmp_path: Path, fake: KobukiFake) -> None:
     robot = build_robot(load_config(cfg))
     assert robot.base is not None
     robot.base.set_velocity(0.2, 0.0)
-    assert _wait(lambda: fake.snapshot().speed == 200)
+    assert wait_for(lambda: fake.snapshot().speed == 200)
     robot.close()
-    assert _wait(lambda: fake.snapshot().speed == 0, 0.5)
+    assert wait_for(lambda: fake.snapshot().speed == 0, 0.5)
 
 
 def test_silent_device_is_one_line_error_naming_device_and_port(tmp_path: Path, fake: KobukiFake) -> None:

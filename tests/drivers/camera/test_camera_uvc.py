@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from driverkit import wait_for
 
 from mmexec.config.yamlload import InputError
 from mmexec.drivers.camera.config import (
@@ -22,15 +23,6 @@ from mmexec.drivers.camera.config import (
 from mmexec.drivers.camera.errors import CameraError
 from mmexec.drivers.camera.uvc import UVCCamera
 from mmexec.drivers.interfaces import ManualClock
-
-
-def wait_for(pred, timeout: float = 2.0) -> bool:  # type: ignore[no-untyped-def]
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.005)
-    return bool(pred())
 
 
 class FakeCapture:

@@ -3,22 +3,12 @@
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterator
 
 import pytest
+from driverkit import wait_for as wait_until
 
 from mmexec.drivers.fakes.kobuki import KobukiFake
-
-
-def wait_until(pred: Callable[[], bool], timeout: float = 2.0) -> bool:
-    """Poll ``pred`` every 5 ms until true or ``timeout`` seconds passed."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.005)
-    return pred()
 
 
 @pytest.fixture(name="wait_until")

@@ -2,20 +2,11 @@
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
+from driverkit import wait_for
 
 from mmexec.drivers.interfaces import Goal, GoalState
 
-
-def wait_for(pred: Callable[[], object], timeout: float = 2.0) -> bool:
-    """Poll ``pred`` until true or ``timeout`` s pass; returns its last value."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.005)
-    return bool(pred())
+__all__ = ["finish", "wait_for"]
 
 
 def finish(goal: Goal, timeout: float = 2.0) -> GoalState:

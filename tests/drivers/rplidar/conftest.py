@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import threading
-import time
 from collections.abc import Callable, Iterator
 
 import pytest
+from driverkit import wait_for
 
 from mmexec.drivers.fakes.rplidar import RplidarFake
 
@@ -17,12 +17,7 @@ POSE = (2.0, 1.5, 0.0)
 
 def _wait_until(pred: Callable[[], object], timeout: float = 3.0) -> bool:
     """Poll ``pred`` every 10 ms until it is truthy or ``timeout`` seconds passed."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if pred():
-            return True
-        time.sleep(0.01)
-    return bool(pred())
+    return wait_for(pred, timeout, poll=0.01)
 
 
 @pytest.fixture
