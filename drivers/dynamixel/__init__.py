@@ -2,6 +2,7 @@
 
 Layers: :mod:`.codec` (pure framing), :mod:`.control_table` (register maps as data, unit
 conversions, fault names), :mod:`.bus` (half-duplex bus with link-derived deadlines),
-:mod:`.wx250s` (the arm device, its I/O thread and the Arm/Gripper adapters),
+:mod:`.model` (the WX250s servo facts), :mod:`.wx250s` (the arm device and its I/O
+thread), :mod:`.arm` (its Arm/Gripper capability adapters),
 :mod:`.bringup` (``mmexec hw ping|fake dynamixel``). See docs/drivers/dynamixel.md.
 """

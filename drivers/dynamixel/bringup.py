@@ -99,7 +99,6 @@ def parse_ids(text: str) -> list[int]:
 #: ping warns when more than this fraction of the exchanges were lost or corrupt
 LINK_WARN_RATIO = 0.01
 _MAX_COUNT = 1000
-HW_ERROR_STATUS = 70  # address of Hardware Error Status (X series)
 
 
 def add_ping_arguments(parser: argparse.ArgumentParser) -> None:
@@ -180,14 +179,15 @@ def _probe(bus: DxlBus, servo: _Servo, attempts: int, count: int) -> None:
         servo.alert |= info is not None and info.alert
     if servo.info.model not in MODELS:
         return  # no control table known: address 70 may mean something else
+    reg = MODELS[servo.info.model].reg("hardware_error_status")
     for _ in range(attempts):  # not link quality: a servo may answer pings only (SRL 0)
-        st = _exchange(servo, bus.read_status, servo.id, HW_ERROR_STATUS, 1, counted=False)
+        st = _exchange(servo, bus.read_status, servo.id, reg.address, reg.size, counted=False)
         if st is None:
             continue
         servo.alert |= st.alert
         if st.result is StatusResult.CRC_ERROR:
             continue
-        if not st.ok or len(st.data) != 1:
+        if not st.ok or len(st.data) != reg.size:
             servo.unreadable = st.result.text if not st.ok else "wrong length"
             return
         servo.faults = decode_hardware_error(st.data[0])

@@ -29,7 +29,12 @@ from typing import Self
 
 from mmexec.drivers.dynamixel import codec
 from mmexec.drivers.dynamixel.codec import BROADCAST_ID, BadFrame, Status, StatusResult
-from mmexec.drivers.dynamixel.control_table import baud_rate_problem, decode_hardware_error
+from mmexec.drivers.dynamixel.control_table import (
+    MODELS,
+    baud_rate_problem,
+    common_register,
+    decode_hardware_error,
+)
 from mmexec.drivers.transport import LinkClosed, LinkError, SerialSettings, SerialTransport
 
 __all__ = [
@@ -205,6 +210,11 @@ class BusStats:
     corrupt: int = 0
     dropped_bytes: int = 0
     extra: dict[str, int] = field(default_factory=dict)
+
+
+#: Hardware Error Status: one address in every known model, so it is read without asking
+#: which model a servo is
+_HARDWARE_ERROR_STATUS = common_register(MODELS.values(), "hardware_error_status")
 
 
 class DxlBus:
@@ -442,5 +452,6 @@ class DxlBus:
         return self.transact(codec.bulk_read(items), [(i, n) for i, _, n in items])
 
     def hardware_error(self, dxl_id: int) -> tuple[str, ...]:
-        """Named faults in a servo's Hardware Error Status (address 70)."""
-        return decode_hardware_error(self.read(dxl_id, 70, 1)[0])
+        """Named faults in a servo's Hardware Error Status (address 70 in every model)."""
+        reg = _HARDWARE_ERROR_STATUS
+        return decode_hardware_error(codec.int_from_le(self.read(dxl_id, reg.address, reg.size)))

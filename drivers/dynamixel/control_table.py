@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+
+from mmexec.drivers.dynamixel.codec import int_to_le
 
 __all__ = [
     "BAUD_RATES",
@@ -32,6 +34,7 @@ __all__ = [
     "OperatingMode",
     "Register",
     "baud_rate_problem",
+    "common_register",
     "current_to_amps",
     "decode_hardware_error",
     "load_to_fraction",
@@ -239,9 +242,19 @@ class Model:
             if r.address < address + length and address < r.address + r.size
         ]
 
+    def encode(self, name: str, value: int) -> bytes:
+        """``value`` [the register's unit] as the bytes of register ``name`` (its size,
+        little-endian, two's complement for negatives); KeyError for an unknown name."""
+        return int_to_le(value, self.reg(name).size)
+
     @property
     def has_current_sensor(self) -> bool:
         return self.has("present_current")
+
+    @property
+    def effort_register(self) -> Register:
+        """Present Current (XM series) or Present Load (XL430 family), both at 126."""
+        return self.reg("present_current" if self.has_current_sensor else "present_load")
 
 
 _ALL_MODES = frozenset(int(m) for m in OperatingMode)
@@ -289,6 +302,21 @@ TWO_XL430_W250 = _xl430(1090, "2XL430-W250")
 MODELS: dict[int, Model] = {
     m.number: m for m in (XM430_W350, XM540_W270, XL430_W250, TWO_XL430_W250)
 }
+
+
+def common_register(models: Iterable[Model], name: str | Callable[[Model], Register]) -> Register:
+    """Register ``name`` (or the one ``name(model)`` picks, e.g. :attr:`Model.effort_register`)
+    where it is at the same address with the same size in every one of ``models``: the one
+    address a Sync Read/Write or a model-less exchange may use. ValueError otherwise."""
+    pick = name if callable(name) else lambda m: m.reg(name)
+    regs = {m.name: pick(m) for m in models}
+    if not regs:
+        raise ValueError(f"register {name!r}: no models given")
+    places = {(r.address, r.size) for r in regs.values()}
+    if len(places) != 1:
+        where = ", ".join(f"{n} {r.name} {r.address}/{r.size}" for n, r in regs.items())
+        raise ValueError(f"register differs between models: {where}")
+    return next(iter(regs.values()))
 
 
 def model_by_number(number: int) -> Model:

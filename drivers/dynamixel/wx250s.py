@@ -23,6 +23,10 @@ address 126 (current/load, velocity, position) for the joint ids, then advances 
   ``torque_off_on_close``);
 * a lost port fails the running goals with "link lost" and ends the thread.
 
+Every register is read and written by name at the address and size of the servo's own
+model (:mod:`.control_table`); the Arm/Gripper capability adapters the device hands out
+(:attr:`WX250s.arm`, :attr:`WX250s.gripper`) live in :mod:`.arm`.
+
 Positions are radians with 2048 pulses = 0 rad, velocities rad/s, efforts in amperes (XM
 servos) or fraction of maximum torque (XL430); the gripper width is metres between the
 finger pads, from the servo angle through the horn/arm linkage of docs/protocols.md 2.5.
@@ -41,6 +45,7 @@ from typing import Self, TypeVar
 import numpy as np
 
 from mmexec.drivers.dynamixel import codec
+from mmexec.drivers.dynamixel.arm import WX250sArm, WX250sGripper
 from mmexec.drivers.dynamixel.bus import (
     BusConfig,
     CorruptReply,
@@ -63,11 +68,14 @@ from mmexec.drivers.dynamixel.control_table import (
     WATCHDOG_MIN_FIRMWARE,
     Model,
     OperatingMode,
+    Register,
     baud_rate_problem,
+    common_register,
     current_to_amps,
     decode_hardware_error,
     load_to_fraction,
     pulses_to_rad,
+    rad_s_to_velocity,
     rad_to_pulses,
     velocity_to_rad_s,
 )
@@ -84,14 +92,11 @@ from mmexec.drivers.dynamixel.model import (
     gripper_width,
 )
 from mmexec.drivers.interfaces import (
-    Arm,
     Clock,
     Goal,
     GoalState,
     GraspState,
-    Gripper,
     GripperState,
-    JointLimit,
     JointState,
     JointTrajectory,
     MonotonicClock,
@@ -106,9 +111,7 @@ __all__ = [
     "JointSpec",
     "ServoReading",
     "WX250s",
-    "WX250sArm",
     "WX250sConfig",
-    "WX250sGripper",
     "finger_offset",
     "gripper_angle_for_width",
     "gripper_width",
@@ -118,16 +121,20 @@ log = logging.getLogger(__name__)
 
 _T = TypeVar("_T")
 
-PRESENT_ADDR = 126
-PRESENT_LEN = 12
-GOAL_POSITION = 116
-GOAL_PWM = 100
-TORQUE_ENABLE = 64
-HW_ERROR = 70
-BUS_WATCHDOG = 98
+#: bytes of the per-cycle Sync Read: current/load, velocity and position are 10 (their
+#: table entries), plus the first 2 of Velocity Trajectory, which this driver has always
+#: asked for (and ignores); kept so the bus traffic (and its benchmark) stay the same
+PRESENT_READ_LEN = 12
 BUS_WATCHDOG_UNIT_MS = round(BUS_WATCHDOG_UNIT_S * 1000)
-#: PWM Limit (address 36) of the gripper servo: the factory value, which bring-up keeps
-GRIPPER_PWM_LIMIT = 885
+#: PWM Limit of the gripper servo: the factory value (its model's table default), which
+#: bring-up keeps
+GRIPPER_PWM_LIMIT = GRIPPER.model.reg("pwm_limit").default
+#: Velocity Limit bring-up writes to every servo (30 rev/min)
+VELOCITY_LIMIT_RAD_S = math.pi
+#: the pan/tilt servos' velocity-based profile (drive mode 0): 30 rev/min, and acceleration
+#: 15 units of 214.577 rev/min^2 (the Interbotix value; the table has no conversion for it)
+PAN_TILT_PROFILE_VELOCITY_RAD_S = math.pi
+PAN_TILT_PROFILE_ACCELERATION = 15
 #: operating modes whose last goal is an effort that goes on while the host is silent (the
 #: servo keeps pushing or turning): the Bus Watchdog is armed on servos in these modes. In the
 #: position modes the servo holds its last goal by itself, which is the safe state; a fired
@@ -151,10 +158,17 @@ class ServoReading:
     raw_effort: int
 
 
+def _span(first: Register, last: Register) -> tuple[int, int]:
+    """Address and length of the block from ``first`` through ``last``."""
+    return first.address, last.address + last.size - first.address
+
+
 class CycleIO:
-    """The per-cycle bus traffic: Sync Write Goal Position to ``write_ids``, Sync Read 12
-    bytes at 126 from ``read_ids``. Pure composition of codec + bus, shared by the arm's I/O
-    thread and the benchmark."""
+    """The per-cycle bus traffic: Sync Write Goal Position to ``write_ids``, Sync Read of
+    present current/load, velocity and position (12 bytes at 126) from ``read_ids``; the
+    addresses come from the servos' control tables (one address for all of them, as a Sync
+    exchange needs). Pure composition of codec + bus, shared by the arm's I/O thread and the
+    benchmark."""
 
     def __init__(
         self,
@@ -167,27 +181,42 @@ class CycleIO:
         self.write_ids = tuple(write_ids)
         self.read_ids = tuple(read_ids)
         self._has_current = {i: models[i].has_current_sensor for i in read_ids}
+        self._goal = common_register((models[i] for i in write_ids), "goal_position")
+        read_models = [models[i] for i in read_ids]
+        effort = common_register(read_models, lambda m: m.effort_register)
+        velocity = common_register(read_models, "present_velocity")
+        position = common_register(read_models, "present_position")
+        address, length = _span(effort, position)
+        self._block = (address, max(length, PRESENT_READ_LEN))
+        #: (offset, size) of effort, velocity, position in the block
+        self._fields = [
+            (r.address - effort.address, r.size) for r in (effort, velocity, position)
+        ]
 
     def write_goals(self, pulses: Sequence[int]) -> None:
         """One Sync Write of Goal Position [pulses], in ``write_ids`` order."""
         if len(pulses) != len(self.write_ids):
             raise ValueError(f"expected {len(self.write_ids)} goals, got {len(pulses)}")
+        reg = self._goal
         self.bus.sync_write(
-            GOAL_POSITION, 4, [(i, codec.int_to_le(p, 4)) for i, p in zip(self.write_ids, pulses)]
+            reg.address,
+            reg.size,
+            [(i, codec.int_to_le(p, reg.size)) for i, p in zip(self.write_ids, pulses)],
         )
 
     def read_state(self) -> dict[int, ServoReading]:
         """One Sync Read of present current/load, velocity and position."""
-        statuses = self.bus.sync_read(PRESENT_ADDR, PRESENT_LEN, self.read_ids)
+        address, length = self._block
+        statuses = self.bus.sync_read(address, length, self.read_ids)
         return {i: self.decode(i, st) for i, st in statuses.items()}
 
     def decode(self, dxl_id: int, st: Status) -> ServoReading:
         d = st.data
-        if len(d) < 10:
+        if len(d) < sum(self._fields[-1]):
             raise DxlLinkError(self.bus.port, f"short state reply from servo id {dxl_id}", dxl_id)
-        eff = int.from_bytes(d[0:2], "little", signed=True)
-        vel = int.from_bytes(d[2:6], "little", signed=True)
-        pos = int.from_bytes(d[6:10], "little", signed=True)
+        eff, vel, pos = (
+            int.from_bytes(d[at : at + size], "little", signed=True) for at, size in self._fields
+        )
         effort = current_to_amps(eff) if self._has_current[dxl_id] else load_to_fraction(eff)
         return ServoReading(
             pulses_to_rad(pos), velocity_to_rad_s(vel), effort, st.error, pos, vel, eff
@@ -463,6 +492,23 @@ class WX250s:
         master = next(j for j in self.all_joints if j.shadow == dxl_id)
         return master.model
 
+    # -- register access: by name, at the address and size of the servo's own model
+    def _write(self, dxl_id: int, name: str, value: int) -> None:
+        """Write ``value`` [the register's unit] to register ``name`` of servo ``dxl_id``."""
+        model = self._model_of(dxl_id)
+        self.bus.write(dxl_id, model.reg(name).address, model.encode(name, value))
+
+    def _read(self, dxl_id: int, name: str) -> int:
+        """Register ``name`` of servo ``dxl_id`` (signed where the table says so)."""
+        reg = self._model_of(dxl_id).reg(name)
+        return codec.int_from_le(self.bus.read(dxl_id, reg.address, reg.size), signed=reg.signed)
+
+    def _send_gripper_pwm(self, pwm: int) -> None:
+        """Goal PWM of the gripper servo, as the one-servo Sync Write (no status) the I/O
+        thread uses for it."""
+        reg = GRIPPER.model.reg("goal_pwm")
+        self.bus.sync_write(reg.address, reg.size, [(GRIPPER.id, GRIPPER.model.encode(reg.name, pwm))])
+
     def connect(self) -> None:
         """Open the port, run the bring-up and start the I/O thread.
 
@@ -540,19 +586,21 @@ class WX250s:
             assert last is not None
             raise last
 
+        velocity_limit = rad_s_to_velocity(VELOCITY_LIMIT_RAD_S)
+        pan_tilt_velocity = rad_s_to_velocity(PAN_TILT_PROFILE_VELOCITY_RAD_S)
         ids = self.servo_ids()
         for dxl_id in ids:
-            retry(bus.write, dxl_id, TORQUE_ENABLE, b"\x00")
+            retry(self._write, dxl_id, "torque_enable", 0)
         for dxl_id in ids:
             # Bus Watchdog off, which also clears a watchdog error left from before (a link
             # lost while armed): until then every goal write would answer data range error
-            retry(bus.write, dxl_id, BUS_WATCHDOG, b"\x00")
+            retry(self._write, dxl_id, "bus_watchdog", 0)
         for dxl_id in ids:
-            if retry(bus.read, dxl_id, HW_ERROR, 1)[0]:
+            if retry(self._read, dxl_id, "hardware_error_status"):
                 raise HardwareFault(
                     bus.port,
                     dxl_id,
-                    decode_hardware_error(retry(bus.read, dxl_id, HW_ERROR, 1)[0]),
+                    decode_hardware_error(retry(self._read, dxl_id, "hardware_error_status")),
                     self.name_of[dxl_id],
                 )
         for j in self.all_joints:
@@ -564,22 +612,23 @@ class WX250s:
             mode = self._mode_of(j)
             for dxl_id, dmode, secondary in targets:
                 if cfg.write_eeprom:
-                    retry(bus.write, dxl_id, 9, b"\x00")  # Return Delay Time 0
-                    retry(bus.write, dxl_id, 10, bytes((dmode,)))  # Drive Mode
-                    retry(bus.write, dxl_id, 12, bytes((secondary,)))  # Secondary ID
-                    retry(bus.write, dxl_id, 44, codec.int_to_le(131, 4))  # Velocity Limit 30 rpm
-                    retry(bus.write, dxl_id, 48, codec.int_to_le(j.max_pulses, 4))  # Max Position Limit
-                    retry(bus.write, dxl_id, 52, codec.int_to_le(j.min_pulses, 4))  # Min Position Limit
-                    retry(bus.write, dxl_id, 63, bytes((cfg.shutdown_mask,)))  # Shutdown
-                retry(bus.write, dxl_id, 11, bytes((int(mode),)))  # Operating Mode
+                    retry(self._write, dxl_id, "return_delay_time", 0)
+                    retry(self._write, dxl_id, "drive_mode", dmode)
+                    retry(self._write, dxl_id, "secondary_id", secondary)
+                    retry(self._write, dxl_id, "velocity_limit", velocity_limit)
+                    retry(self._write, dxl_id, "max_position_limit", j.max_pulses)
+                    retry(self._write, dxl_id, "min_position_limit", j.min_pulses)
+                    retry(self._write, dxl_id, "shutdown", cfg.shutdown_mask)
+                retry(self._write, dxl_id, "operating_mode", int(mode))
                 if j is GRIPPER:
-                    retry(bus.write, dxl_id, GOAL_PWM, codec.int_to_le(0, 2))
+                    retry(self._write, dxl_id, "goal_pwm", 0)
                 elif arm_group:
-                    retry(bus.write, dxl_id, 108, codec.int_to_le(cfg.profile_acceleration_ms, 4))
-                    retry(bus.write, dxl_id, 112, codec.int_to_le(cfg.profile_velocity_ms, 4))
+                    # time-based profile (drive mode bit 2): both in ms
+                    retry(self._write, dxl_id, "profile_acceleration", cfg.profile_acceleration_ms)
+                    retry(self._write, dxl_id, "profile_velocity", cfg.profile_velocity_ms)
                 else:
-                    retry(bus.write, dxl_id, 108, codec.int_to_le(15, 4))
-                    retry(bus.write, dxl_id, 112, codec.int_to_le(131, 4))
+                    retry(self._write, dxl_id, "profile_acceleration", PAN_TILT_PROFILE_ACCELERATION)
+                    retry(self._write, dxl_id, "profile_velocity", pan_tilt_velocity)
         models = {i: self.by_id[i].model for i in self.read_ids}
         self._io = CycleIO(bus, [j.id for j in self.position_joints], self.read_ids, models)
         readings = retry(self._io.read_state)
@@ -587,13 +636,13 @@ class WX250s:
         for j in self.position_joints:
             p = min(max(readings[j.id].raw_position, j.min_pulses), j.max_pulses)
             goals.append(p)
-            retry(bus.write, j.id, GOAL_POSITION, codec.int_to_le(p, 4))
+            retry(self._write, j.id, "goal_position", p)
         for dxl_id in ids:
-            retry(bus.write, dxl_id, TORQUE_ENABLE, b"\x01")
+            retry(self._write, dxl_id, "torque_enable", 1)
         for dxl_id in self.watchdog_ids:
             # armed last: it watches only while torque is on, and the I/O thread's Sync Read
             # (every cycle, this id included) refreshes it from now on
-            retry(bus.write, dxl_id, BUS_WATCHDOG, bytes((cfg.bus_watchdog_units,)))
+            retry(self._write, dxl_id, "bus_watchdog", cfg.bus_watchdog_units)
         with self._lock:
             self._goals_pulses = goals
             self._sent_goals = list(goals)
@@ -620,13 +669,13 @@ class WX250s:
                 self._hold_present()
                 if self.config.torque_off_on_close:
                     for dxl_id in self.servo_ids():
-                        self.bus.write(dxl_id, TORQUE_ENABLE, b"\x00")
+                        self._write(dxl_id, "torque_enable", 0)
                 for dxl_id in self.watchdog_ids:
                     # off (and any trip cleared): the next program on this bus, or our next
                     # connect(), finds goal writes accepted
-                    self.bus.write(dxl_id, BUS_WATCHDOG, b"\x00")
+                    self._write(dxl_id, "bus_watchdog", 0)
                 if self._grip_pwm:
-                    self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+                    self._send_gripper_pwm(0)
             except DynamixelError as e:
                 log.warning("%s: could not hold position on close: %s", self.bus.port, e)
         self._finish_goals("driver closed", cancelled=True)
@@ -751,7 +800,7 @@ class WX250s:
                 if targets is None:
                     targets = ids
                     if targets is None:
-                        targets = [i for i in self.servo_ids() if self.bus.read(i, HW_ERROR, 1)[0]]
+                        targets = [i for i in self.servo_ids() if self._read(i, "hardware_error_status")]
                     for i in targets:
                         self.bus.reboot(i)
                     # the reboot goal's deadline is on the injected clock (a goal deadline, not
@@ -794,13 +843,13 @@ class WX250s:
             j = self.by_id.get(i)
             if j is not None and j in self.position_joints and i in readings:
                 p = min(max(readings[i].raw_position, j.min_pulses), j.max_pulses)
-                self.bus.write(i, GOAL_POSITION, codec.int_to_le(p, 4))
+                self._write(i, "goal_position", p)
                 with self._lock:
                     self._goals_pulses[self.position_joints.index(j)] = p
-            self.bus.write(i, TORQUE_ENABLE, b"\x01")
+            self._write(i, "torque_enable", 1)
             if i in self.watchdog_ids:
                 # a Reboot resets RAM: Goal PWM 0 and the Bus Watchdog off; arm it again
-                self.bus.write(i, BUS_WATCHDOG, bytes((self.config.bus_watchdog_units,)))
+                self._write(i, "bus_watchdog", self.config.bus_watchdog_units)
             if i == GRIPPER.id:
                 self._grip_pwm = 0
         with self._lock:
@@ -1041,7 +1090,7 @@ class WX250s:
             with self._lock:
                 self._grip = None
             want = 0
-            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+            self._send_gripper_pwm(0)
             self._grip_pwm = 0
             run.goal.mark_cancelled("cancelled: gripper stopped")
             return
@@ -1063,7 +1112,7 @@ class WX250s:
                     # the goal naming the watchdog
                     log.warning("%s: could not clear the Bus Watchdog: %s", self.bus.port, e)
         if want != self._grip_pwm:
-            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(want, 2))])
+            self._send_gripper_pwm(want)
             self._grip_pwm = want
 
     # -- Bus Watchdog (servos in WATCHDOG_MODES; the I/O thread only)
@@ -1073,18 +1122,18 @@ class WX250s:
         if dxl_id not in self.watchdog_ids:
             return False
         try:
-            value = self.bus.read(dxl_id, BUS_WATCHDOG, 1)
+            value = self._read(dxl_id, "bus_watchdog")
         except LinkLost:
             raise
         except (NoReply, CorruptReply) as e:
             log.debug("%s: Bus Watchdog check skipped: %s", self.bus.port, e)
             return False
-        return codec.int_from_le(value, signed=True) == BUS_WATCHDOG_TRIPPED
+        return value == BUS_WATCHDOG_TRIPPED
 
     def _rearm_watchdog(self, dxl_id: int) -> None:
         """Write 0 (clears the watchdog error: goal writes are accepted again), then arm it."""
-        self.bus.write(dxl_id, BUS_WATCHDOG, b"\x00")
-        self.bus.write(dxl_id, BUS_WATCHDOG, bytes((self.config.bus_watchdog_units,)))
+        self._write(dxl_id, "bus_watchdog", 0)
+        self._write(dxl_id, "bus_watchdog", self.config.bus_watchdog_units)
         self.watchdog_trips += 1
 
     def _check_watchdog(self) -> None:
@@ -1111,7 +1160,7 @@ class WX250s:
         log.warning("%s%s", reason, "; squeeze restored" if squeeze else "")
         try:
             self._rearm_watchdog(GRIPPER.id)
-            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(squeeze, 2))])
+            self._send_gripper_pwm(squeeze)
         except (NoReply, CorruptReply) as e:
             # the watchdog still reads -1: the next goal write (or, while squeezing, the
             # next cycle's check) clears it again
@@ -1144,7 +1193,7 @@ class WX250s:
             if now - run.start > cfg.gripper_timeout:
                 with self._lock:
                     self._grip = None
-                self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+                self._send_gripper_pwm(0)
                 self._grip_pwm = 0
                 run.goal.fail(
                     f"gripper did not stop within {cfg.gripper_timeout:.1f} s (width {width:.4f} m)"
@@ -1152,7 +1201,7 @@ class WX250s:
             return
         if result is GraspState.AT_POSITION:
             # free fingers: stop pushing. On an object: keep squeezing at the commanded PWM.
-            self.bus.sync_write(GOAL_PWM, 2, [(GRIPPER.id, codec.int_to_le(0, 2))])
+            self._send_gripper_pwm(0)
             self._grip_pwm = 0
         state = GripperState(width, result, now)
         with self._lock:
@@ -1184,62 +1233,3 @@ def check_limits(joints: Sequence[JointSpec], q0: Sequence[float], traj: JointTr
                 )
         prev_t, prev_q = t, q
     return ""
-
-
-# --------------------------------------------------------------------------- adapters
-
-
-class WX250sArm(Arm):
-    """:class:`~mmexec.drivers.interfaces.Arm` over a :class:`WX250s` device."""
-
-    def __init__(self, device: WX250s) -> None:
-        self._dev = device
-
-    @property
-    def joint_names(self) -> tuple[str, ...]:
-        return tuple(j.name for j in self._dev.joints)
-
-    @property
-    def limits(self) -> tuple[JointLimit, ...]:
-        return tuple(j.limit() for j in self._dev.joints)
-
-    @property
-    def mount(self) -> np.ndarray:
-        """``T_base_armbase``: LoCoBot arm_base_link in base_link, identity for a bare arm."""
-        T = np.eye(4)
-        if self._dev.config.locobot:
-            T[:3, 3] = LOCOBOT_MOUNT
-        return T
-
-    def state(self) -> JointState:
-        return self._dev.joint_state()
-
-    def follow(self, trajectory: JointTrajectory) -> Goal:
-        return self._dev.follow(trajectory)
-
-    def stop(self) -> None:
-        self._dev.stop()
-
-
-class WX250sGripper(Gripper):
-    """:class:`~mmexec.drivers.interfaces.Gripper` over the wx250s gripper servo (PWM mode).
-
-    ``speed`` cannot be set in PWM mode (the fingers move at the speed the PWM gives);
-    ``force`` [N] maps linearly onto PWM between ``gripper_pwm_min`` and ``gripper_pwm_max``
-    (at ``gripper_max_force``), which is also the squeeze kept on a grasped object.
-    """
-
-    min_width = 2 * FINGER_MIN
-    max_width = 2 * FINGER_MAX
-
-    def __init__(self, device: WX250s) -> None:
-        self._dev = device
-        self.max_force = device.config.gripper_max_force
-
-    def state(self) -> GripperState:
-        return self._dev.gripper_state()
-
-    def move(self, width: float, *, speed: float = 0.1, force: float = 50.0) -> Goal:
-        if speed <= 0:
-            return Goal.failed("gripper", f"speed must be > 0 m/s, got {speed}")
-        return self._dev.gripper_move(width, force)
