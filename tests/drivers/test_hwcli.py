@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -12,6 +11,7 @@ import time
 from collections.abc import Iterator
 
 import pytest
+from driverkit import fake_process
 
 from mmexec.drivers import hwcli
 from mmexec.drivers.fakes.kobuki import KobukiFake
@@ -91,14 +91,7 @@ def test_missing_bringup_module_is_one_line(monkeypatch: pytest.MonkeyPatch, cap
 
 
 def test_fake_kobuki_subprocess_ping_and_sigint() -> None:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "mmexec.drivers.hwcli", "fake", "kobuki"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-    )
-    try:
-        assert proc.stdout is not None
-        port = proc.stdout.readline().strip()  # bounded: the fake prints at start-up
+    with fake_process("kobuki", stop=signal.SIGINT, exit_timeout=5) as port:
         assert port.startswith("/dev/"), port
         result = subprocess.run(
             [sys.executable, "-m", "mmexec.drivers.hwcli", "ping", "kobuki", "--port", port],
@@ -106,10 +99,3 @@ def test_fake_kobuki_subprocess_ping_and_sigint() -> None:
         )
         assert result.returncode == 0, result.stderr
         assert result.stdout.startswith(f"kobuki on {port}: firmware 1.2.0")
-        proc.send_signal(signal.SIGINT)
-        assert proc.wait(timeout=5) == 0
-        assert "Traceback" not in (proc.stderr.read() if proc.stderr else "")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5)

@@ -6,46 +6,15 @@ from __future__ import annotations
 
 import os
 import random
-import selectors
-import signal
 import subprocess
 import sys
-import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 import pytest
+from driverkit import fake_process
 
 from mmexec.drivers.hwcli import main
 
 HW = [sys.executable, "-m", "mmexec.drivers.hwcli"]
-
-
-@contextmanager
-def fake_process(*args: str, timeout: float = 15.0) -> Iterator[str]:
-    """Run ``mmexec hw fake ARGS``; yield the port it prints (bounded wait); SIGINT at exit."""
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([*HW, "fake", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
-    try:
-        assert proc.stdout is not None
-        sel = selectors.DefaultSelector()
-        sel.register(proc.stdout, selectors.EVENT_READ)
-        deadline = time.monotonic() + timeout
-        while not sel.select(0.1):
-            assert proc.poll() is None, f"fake exited: {proc.stderr.read() if proc.stderr else ''}"
-            assert time.monotonic() < deadline, f"fake {args} printed no port within {timeout} s"
-        sel.close()
-        yield proc.stdout.readline().strip()
-        proc.send_signal(signal.SIGINT)
-        # bounded generously: the UR fake asks its stub process to quit (up to 5 s, then kills
-        # it, another 5 s), and a loaded 2-core machine is slow to schedule all of it
-        assert proc.wait(timeout=30) == 0
-        assert "Traceback" not in (proc.stderr.read() if proc.stderr else "")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5)
 
 
 def ping(capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:

@@ -3,7 +3,6 @@ and ``mmexec hw fake rplidar`` as a real process."""
 
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess
@@ -11,6 +10,7 @@ import sys
 from collections.abc import Callable
 
 import pytest
+from driverkit import fake_process
 
 from mmexec.drivers import hwcli
 from mmexec.drivers.fakes.rplidar import RplidarFake
@@ -88,22 +88,10 @@ def test_ping_bad_options_exit_2(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_fake_rplidar_subprocess_ping_and_sigterm() -> None:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen([sys.executable, "-m", "mmexec.drivers.hwcli", "fake", "rplidar"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    try:
-        assert proc.stdout is not None
-        port = proc.stdout.readline().strip()   # bounded: the fake prints at start-up
+    with fake_process("rplidar", stop=signal.SIGTERM, exit_timeout=10) as port:
         assert port.startswith("/dev/"), port
         result = subprocess.run(
             [sys.executable, "-m", "mmexec.drivers.hwcli", "ping", "rplidar", "--port", port, "--duration", "0.5"],
             capture_output=True, text=True, timeout=30, check=False)
         assert result.returncode == 0, result.stderr
         assert result.stdout.startswith(f"rplidar on {port}: A2M8")
-        proc.send_signal(signal.SIGTERM)
-        assert proc.wait(timeout=10) == 0
-        assert "Traceback" not in (proc.stderr.read() if proc.stderr else "")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=5)
