@@ -4,6 +4,7 @@ Section schema (every device optional; see docs/drivers/bringup.md)::
 
     robot:
       name: locobot
+      description: locobot_wx250s    # the robot model (mmexec.drivers.descriptions): skills plan with it
       base:    {kind: kobuki, port: /dev/kobuki, start: [x, y, theta], ...KobukiConfig keys}
       arm:     {kind: wx250s, port: /dev/ttyDXL, baudrate: 1000000, locobot: true, ...WX250sConfig keys}
                # or {kind: ur, host: 192.168.1.10, ...}
@@ -54,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from mmexec.config.yamlload import InputError, Mark, Problem, Problems, YDict, bind, did_you_mean
+from mmexec.drivers import descriptions
 from mmexec.drivers.backendspec import BackendSpec, NavMap
 from mmexec.drivers.interfaces import (
     CapabilityError,
@@ -335,7 +337,7 @@ def _wx250s_gripper(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
     if "arm" not in ctx.devices:
         ctx.problems.add(section.value_mark("kind"), f"{path}.kind: 'wx250s_gripper' needs 'arm: {{kind: wx250s}}'")
         return None
-    mod = _import("mmexec.drivers.dynamixel.wx250s", "kind 'wx250s_gripper'", section.value_mark("kind"), path)
+    mod = _import("mmexec.drivers.dynamixel.arm", "kind 'wx250s_gripper'", section.value_mark("kind"), path)
     device = ctx.devices["arm"]
     if device is None:
         return None  # the arm section's problems are reported there
@@ -555,7 +557,7 @@ DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
     "lidar": {"rplidar": _rplidar},
 }
 
-_TOP_KEYS = ("name", "base", "arm", "gripper", "camera", "lidar", "map", "scene")
+_TOP_KEYS = ("name", "description", "base", "arm", "gripper", "camera", "lidar", "map", "scene")
 
 
 # --------------------------------------------------------------------------- build
@@ -660,6 +662,7 @@ def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot,
         problems.add(section.value_mark("name"), f"robot.name: expected a string, got {name!r}")
         name = "robot"
     robot = RealRobot(name, profile)
+    robot.description = _description(section, problems)
     ctx = _Ctx(robot, problems)
     plans: list[_Plan] = []
     for slot in ("base", "arm", "gripper", "camera", "lidar"):
@@ -689,6 +692,19 @@ def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot,
     robot.scene = _load_scene(section, problems)
     problems.raise_if_any()
     return robot, plans, ctx
+
+
+def _description(section: YDict, problems: Problems) -> descriptions.RobotDescription | None:
+    """The robot description ``robot.description`` names (None without the key)."""
+    if "description" not in section:
+        return None
+    name = section["description"]
+    known = descriptions.names()
+    if not isinstance(name, str) or name not in known:
+        problems.add(section.value_mark("description"), f"robot.description: expected one of "
+                     f"{', '.join(map(repr, known))}, got {name!r}" + did_you_mean(str(name), known))
+        return None
+    return descriptions.get(name)
 
 
 def _load_map(section: YDict, problems: Problems) -> OccupancyGrid | None:
