@@ -1,7 +1,9 @@
 """UR e-Series arm facts (docs/robots.md section 2): joint names, limits, DH kinematics, frames.
 
-The arm family shared by the robots built on a UR arm (:mod:`.ur5e_robotiq`) and by the
-UR driver (:mod:`mmexec.drivers.ur`, which re-exports this module as its ``model``).
+The arm family shared by the robots built on a UR arm (:mod:`.ur_platform`:
+:mod:`.ur5e_robotiq`, :mod:`.ur3e_robotiq`) and by the UR driver (:mod:`mmexec.drivers.ur`,
+which re-exports this module as its ``model``). :func:`add_arm` writes a model's links and
+joints into a robot's link tree (the ROS description's frames, primitive collision shapes).
 
 Frames: the controller reports TCP poses in its ``base`` frame; the ROS description's
 ``base_link`` is ``base`` rotated by pi about z, so x and y flip sign between them. Joint
@@ -13,17 +15,22 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from mmexec.drivers.descriptions.chain import ArmChain, dh_to_poe, dh_transform
+from mmexec.drivers.descriptions.linktree import BLUE, GREY, LIGHT, Geom, LinkTree, Vec3
 from mmexec.drivers.interfaces import JointLimit
 
 __all__ = [
     "DH",
     "JOINT_NAMES",
+    "LINKS",
     "MODELS",
     "T_BASELINK_BASE",
+    "LinkShapes",
+    "add_arm",
     "arm_chain",
     "forward_kinematics",
     "joint_limits",
@@ -70,6 +77,42 @@ _SPEED = {"ur5e": (math.pi,) * 6, "ur3e": (math.pi, math.pi, math.pi, _TWO_PI, _
 #: joints without a position limit in the ROS description, per model
 _CONTINUOUS: dict[str, frozenset[str]] = {"ur5e": frozenset(), "ur3e": frozenset({"wrist_3_joint"})}
 
+
+
+@dataclass(frozen=True)
+class LinkShapes:
+    """One UR model's links for a link tree: masses [kg] of ``base_link`` and links 1-6
+    (docs/robots.md 2.1; the base mass is the ROS description's), the ROS description's
+    ``shoulder_offset`` and ``elbow_offset`` [m] (where the upper arm and forearm tubes
+    run, off the DH plane), and primitive collision cylinders (radius, length) [m]:
+    ``base``, ``shoulder`` (centred ``shoulder_z`` below the shoulder frame), the tube radii
+    of the upper arm and forearm, the wrist 1/2 joint housings (``wrist``) and
+    ``wrist_3``. The cylinders are approximations of the arm's outline (sim assumption,
+    docs/sim.md), not vendor geometry."""
+
+    masses: tuple[float, float, float, float, float, float, float]
+    shoulder_offset: float
+    elbow_offset: float
+    base: tuple[float, float]
+    shoulder: tuple[float, float]
+    shoulder_z: float
+    upper_arm_radius: float
+    forearm_radius: float
+    wrist: tuple[float, float]
+    wrist_3: tuple[float, float]
+
+
+#: per model: its links (masses and offsets from the ROS description's physical
+#: parameters; collision cylinders sized to the arm's outline)
+LINKS: dict[str, LinkShapes] = {
+    "ur5e": LinkShapes(masses=(4.0, 3.761, 8.058, 2.846, 1.37, 1.3, 0.365), shoulder_offset=0.138,
+                       elbow_offset=0.007, base=(0.075, 0.03), shoulder=(0.06, 0.12), shoulder_z=-0.02,
+                       upper_arm_radius=0.054, forearm_radius=0.04, wrist=(0.038, 0.09), wrist_3=(0.038, 0.03)),
+    "ur3e": LinkShapes(masses=(2.0, 1.98, 3.4445, 1.437, 0.871, 0.805, 0.261), shoulder_offset=0.120,
+                       elbow_offset=0.027, base=(0.064, 0.03), shoulder=(0.045, 0.10), shoulder_z=-0.02,
+                       upper_arm_radius=0.045, forearm_radius=0.035, wrist=(0.032, 0.08), wrist_3=(0.032, 0.025)),
+}
+
 #: ``T_base_link_base``: the controller's ``base`` frame in ROS ``base_link`` (pi about z).
 T_BASELINK_BASE = np.array(
     [[-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
@@ -110,6 +153,50 @@ def arm_chain(model: str, *, tcp_offset: float, acceleration: float) -> ArmChain
     S = np.vstack([Rz @ S[:3], Rz @ S[3:]])
     return ArmChain(model, JOINT_NAMES, S, T_BASELINK_BASE @ M, joint_limits(model), approach_axis=2,
                     tcp_offset=tcp_offset, acceleration=acceleration)
+
+
+def add_arm(m: LinkTree, model: str, parent: str, mount: Vec3) -> None:
+    """Add the UR ``model`` to the link tree ``m``: ``base_link`` fixed at ``mount`` [m] in
+    ``parent`` (joint ``arm_mount``), the six joints with the ROS description's origins,
+    which carry the official DH offsets (d1, a2, a3, d4, d5, d6; docs/robots.md 2.3), and
+    :func:`joint_limits`, then ``flange`` and ``tool0`` (z out of the flange). A joint
+    without a position limit (the UR3e's wrist 3) is ``continuous``."""
+    (d1, _, _), (_, a2, _), (_, a3, _), (d4, _, _), (d5, _, _), (d6, _, _) = DH[model]
+    shp = LINKS[model]
+    mb, m1, m2, m3, m4, m5, m6 = shp.masses
+    lim = {j.name: {"kind": "revolute" if math.isfinite(j.lower) else "continuous", "lower": j.lower,
+                    "upper": j.upper, "velocity": j.velocity, "effort": j.effort}
+           for j in joint_limits(model)}
+    m.link("base_link", (Geom("cylinder", shp.base, (0.0, 0.0, shp.base[1] / 2), rgba=LIGHT),), mass=mb)
+    m.joint("arm_mount", "fixed", parent, "base_link", mount)
+    m.link("base_link_inertia", (), mass=0.01)
+    m.joint("base_link-base_link_inertia", "fixed", "base_link", "base_link_inertia", rpy=(0.0, 0.0, math.pi))
+    m.link("shoulder_link", (Geom("cylinder", shp.shoulder, (0.0, 0.0, shp.shoulder_z), rgba=BLUE),), mass=m1)
+    m.joint("shoulder_pan_joint", parent="base_link_inertia", child="shoulder_link", xyz=(0.0, 0.0, d1),
+            **lim["shoulder_pan_joint"])
+    upper = (a2 / 2, 0.0, shp.shoulder_offset)
+    m.link("upper_arm_link", (
+        Geom("cylinder", (shp.upper_arm_radius, -a2), upper, (0.0, math.pi / 2, 0.0), rgba=LIGHT),
+    ), mass=m2, com=upper)
+    m.joint("shoulder_lift_joint", parent="shoulder_link", child="upper_arm_link", rpy=(math.pi / 2, 0.0, 0.0),
+            **lim["shoulder_lift_joint"])
+    fore = (a3 / 2, 0.0, shp.elbow_offset)
+    m.link("forearm_link", (
+        Geom("cylinder", (shp.forearm_radius, -a3), fore, (0.0, math.pi / 2, 0.0), rgba=LIGHT),
+    ), mass=m3, com=fore)
+    m.joint("elbow_joint", parent="upper_arm_link", child="forearm_link", xyz=(a2, 0.0, 0.0), **lim["elbow_joint"])
+    m.link("wrist_1_link", (Geom("cylinder", shp.wrist, (0.0, 0.0, 0.0), rgba=BLUE),), mass=m4)
+    m.joint("wrist_1_joint", parent="forearm_link", child="wrist_1_link", xyz=(a3, 0.0, d4), **lim["wrist_1_joint"])
+    m.link("wrist_2_link", (Geom("cylinder", shp.wrist, (0.0, 0.0, 0.0), rgba=BLUE),), mass=m5)
+    m.joint("wrist_2_joint", parent="wrist_1_link", child="wrist_2_link", xyz=(0.0, -d5, 0.0),
+            rpy=(math.pi / 2, 0.0, 0.0), **lim["wrist_2_joint"])
+    m.link("wrist_3_link", (Geom("cylinder", shp.wrist_3, (0.0, 0.0, -shp.wrist_3[1] / 2), rgba=GREY),), mass=m6)
+    m.joint("wrist_3_joint", parent="wrist_2_link", child="wrist_3_link", xyz=(0.0, d6, 0.0),
+            rpy=(math.pi / 2, math.pi, math.pi), **lim["wrist_3_joint"])
+    m.link("flange", (), mass=0.001)
+    m.joint("wrist_3-flange", "fixed", "wrist_3_link", "flange", rpy=(0.0, -math.pi / 2, -math.pi / 2))
+    m.link("tool0", (), mass=0.001)
+    m.joint("flange-tool0", "fixed", "flange", "tool0", rpy=(math.pi / 2, 0.0, math.pi / 2))
 
 
 def pose_to_matrix(pose: Sequence[float]) -> np.ndarray:

@@ -50,7 +50,7 @@ def test_the_profile_model_names_it_for_a_robot_without_one(contexts: list[Skill
 
 @pytest.mark.parametrize(("description", "arm", "message"), [
     (None, {}, (r"the robot has no description to plan with: name its model in the config \(robot.description, "
-               r"sim.robot or profile.arm.model: one of locobot_wx250s, ur5e_robotiq\)")),
+               rf"sim.robot or profile.arm.model: one of {', '.join(descriptions.names())}\)")),
     ("locobot_wx250s", {"model": "ur5e_robotiq"}, (r"profile.arm.model 'ur5e_robotiq' is not this robot's "
                                                   r"model 'locobot_wx250s'")),
     ("ur5e_robotiq", {}, (r"robot model 'ur5e_robotiq' plans joints \['shoulder_pan_joint', .*but the arm has "
@@ -68,7 +68,7 @@ def test_an_unknown_profile_model_is_refused_when_the_profile_loads() -> None:
     assert ArmSettings(model="locobot_wx250s").validate() == []
     assert ArmSettings(model="ur5e_robotik").validate() == [
         ("model: unknown robot model 'ur5e_robotik'; did you mean 'ur5e_robotiq'? "
-        "(known: locobot_wx250s, ur5e_robotiq)")]
+        f"(known: {', '.join(descriptions.names())})")]
     with pytest.raises(SkillFailure, match=r"profile.arm: model: unknown robot model 'ur5e_robotik'") as ei:
         workspace(_ctx(descriptions.get("ur5e_robotiq"), {"model": "ur5e_robotik"}))
     assert ei.value.kind is FailureKind.PRECONDITION
