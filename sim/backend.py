@@ -4,8 +4,9 @@ The executive's config factory calls :func:`build` with the config's ``sim:`` se
 (a :class:`~mmexec.config.yamlload.YDict`, or None for all defaults). Keys (all
 optional, unknown keys are errors; see docs/sim.md):
 
-``robot`` (a robot description's name: locobot_wx250s | ur5e_robotiq, see
-:mod:`mmexec.drivers.descriptions`), ``world`` (shipped name or path),
+``robot`` (the name of a registered robot description, e.g. locobot_wx250s,
+ur5e_robotiq, ur3e_robotiq: see :mod:`mmexec.drivers.descriptions`), ``world``
+(shipped name or path),
 ``physics_hz`` (240), ``camera`` (width, height, hfov, near, far, noise, pan, tilt,
 mount), ``lidar`` (beams, range_min, range_max, noise, noise_fraction, quality),
 ``odometry_noise`` (profile, linear, angular, scale, gyro_scale, gyro_bias, slip),

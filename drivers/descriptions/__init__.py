@@ -11,7 +11,8 @@ modules (:mod:`.wx250s`, :mod:`.ur`).
 Modules: :mod:`.description` (:class:`RobotDescription`), :mod:`.chain` (:class:`ArmChain`,
 DH to PoE), :mod:`.model_info` (:class:`ModelInfo`), :mod:`.linktree` (links, joints,
 primitive geometry); arm and gripper families :mod:`.wx250s`, :mod:`.ur`,
-:mod:`.robotiq_2f85`; one module per robot: :mod:`.locobot_wx250s`, :mod:`.ur5e_robotiq`.
+:mod:`.robotiq_2f85`, the UR platform :mod:`.ur_platform`; one module per robot:
+:mod:`.locobot_wx250s`, :mod:`.ur5e_robotiq`, :mod:`.ur3e_robotiq`.
 
 Adding a robot: write its module (a ``DESCRIPTION``), list it in :data:`DESCRIPTIONS`
 below, and give it a config (``sim.robot``, ``robot.description``); then run
@@ -24,7 +25,7 @@ from collections.abc import Mapping
 from types import MappingProxyType
 
 from mmexec.config.yamlload import did_you_mean
-from mmexec.drivers.descriptions import locobot_wx250s, ur5e_robotiq
+from mmexec.drivers.descriptions import locobot_wx250s, ur3e_robotiq, ur5e_robotiq
 from mmexec.drivers.descriptions.chain import ArmChain, dh_to_poe, dh_transform
 from mmexec.drivers.descriptions.description import URDF_DIR, RobotDescription
 from mmexec.drivers.descriptions.linktree import Geom, Joint, Link, LinkTree
@@ -48,7 +49,7 @@ __all__ = [
 
 #: Every robot mmexec knows, by name (the registry: explicit, in this order).
 DESCRIPTIONS: Mapping[str, RobotDescription] = MappingProxyType(
-    {d.name: d for d in (locobot_wx250s.DESCRIPTION, ur5e_robotiq.DESCRIPTION)}
+    {d.name: d for d in (locobot_wx250s.DESCRIPTION, ur5e_robotiq.DESCRIPTION, ur3e_robotiq.DESCRIPTION)}
 )
 
 

@@ -19,7 +19,8 @@ from pathlib import Path
 from mmexec.drivers.descriptions import DESCRIPTIONS, URDF_DIR, RobotDescription, get
 from mmexec.drivers.descriptions.linktree import Geom, Joint, Link, LinkTree
 
-__all__ = ["Geom", "Joint", "Link", "UrdfModel", "locobot_wx250s", "ur5e_robotiq", "urdf_model", "write_all"]
+__all__ = ["Geom", "Joint", "Link", "UrdfModel", "locobot_wx250s", "ur3e_robotiq", "ur5e_robotiq", "urdf_model",
+           "write_all"]
 
 
 @dataclass
@@ -101,6 +102,11 @@ def locobot_wx250s() -> UrdfModel:
 def ur5e_robotiq() -> UrdfModel:
     """The UR5e + 2F-85 platform (:mod:`mmexec.drivers.descriptions.ur5e_robotiq`)."""
     return urdf_model(get("ur5e_robotiq"))
+
+
+def ur3e_robotiq() -> UrdfModel:
+    """The UR3e + 2F-85 platform (:mod:`mmexec.drivers.descriptions.ur3e_robotiq`)."""
+    return urdf_model(get("ur3e_robotiq"))
 
 
 def write_all(folder: Path | None = None) -> list[Path]:

@@ -35,6 +35,7 @@ MISSION = "trees/fetch_item.yaml"
 CONFIGS = {
     "config/locobot.yaml": ("config/locobot_sim.yaml", "locobot_wx250s"),
     "config/ur5e.yaml": ("config/ur5e_sim.yaml", "ur5e_robotiq"),
+    "config/ur3e.yaml": ("config/ur3e_sim.yaml", "ur3e_robotiq"),
 }
 
 

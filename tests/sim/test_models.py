@@ -8,8 +8,9 @@ import numpy as np
 import pybullet as p
 import pytest
 
+from mmexec.drivers.descriptions import DESCRIPTIONS
 from mmexec.sim.models import MODEL_INFO, urdf_path
-from mmexec.sim.models.urdfgen import locobot_wx250s, ur5e_robotiq
+from mmexec.sim.models.urdfgen import urdf_model
 
 
 @pytest.fixture(scope="module")
@@ -75,10 +76,19 @@ def wx250s_poe(q, h: float = 0.005825) -> np.ndarray:
     return T @ M
 
 
-def ur5e_dh(q) -> np.ndarray:
-    """Standard DH of the UR5e (official table): tool0 in the controller's ``base`` frame."""
-    d = (0.1625, 0, 0, 0.1333, 0.0997, 0.0996)
-    a = (0, -0.425, -0.3922, 0, 0, 0)
+#: the official DH tables (docs/robots.md 2.1) of the UR platforms' arms: d, a [m] per joint
+UR_DH = {"ur5e_robotiq": ((0.1625, 0, 0, 0.1333, 0.0997, 0.0996), (0, -0.425, -0.3922, 0, 0, 0)),
+         "ur3e_robotiq": ((0.15185, 0, 0, 0.13105, 0.08535, 0.0921), (0, -0.24355, -0.2132, 0, 0, 0))}
+#: tool0 at the zero configuration in base_link (docs/robots.md 2.1)
+UR_ZERO = {"ur5e_robotiq": (0.8172, 0.2329, 0.0628), "ur3e_robotiq": (0.45675, 0.22315, 0.0665)}
+#: max joint speeds [rad/s] (docs/robots.md 2.2); the UR3e's wrist 3 has no position limit
+UR_SPEED = {"ur5e_robotiq": (math.pi,) * 6, "ur3e_robotiq": (math.pi,) * 3 + (2 * math.pi,) * 3}
+UR_CONTINUOUS = {"ur5e_robotiq": (), "ur3e_robotiq": ("wrist_3_joint",)}
+
+
+def ur_dh(q, model: str = "ur5e_robotiq") -> np.ndarray:
+    """Standard DH of a UR arm (official table): tool0 in the controller's ``base`` frame."""
+    d, a = UR_DH[model]
     alpha = (math.pi / 2, 0, 0, math.pi / 2, -math.pi / 2, 0)
     T = np.eye(4)
     for i in range(6):
@@ -90,8 +100,8 @@ def ur5e_dh(q) -> np.ndarray:
 
 
 def test_committed_urdf_matches_generator():
-    for fn in (locobot_wx250s, ur5e_robotiq):
-        model = fn()
+    for description in DESCRIPTIONS.values():
+        model = urdf_model(description)
         assert urdf_path(model.name).read_text() == model.to_xml(), f"re-run urdfgen for {model.name}"
 
 
@@ -150,16 +160,18 @@ def test_locobot_static_frames(client):
     assert np.allclose(opt[:3, 2], (1, 0, 0), atol=1e-6) and np.allclose(opt[:3, 0], (0, -1, 0), atol=1e-6)
 
 
-def test_ur5e_zero_pose_tool0(client):
-    info = MODEL_INFO["ur5e_robotiq"]
+@pytest.mark.parametrize("model", list(UR_DH))
+def test_ur_zero_pose_tool0(client, model: str):
+    info = MODEL_INFO[model]
     body, links, _ = _load(client, info.name)
     T = np.linalg.inv(_T(client, body, links["base_link"])) @ _T(client, body, links["tool0"])
-    assert np.allclose(T[:3, 3], (0.8172, 0.2329, 0.0628), atol=1e-3)
+    assert np.allclose(T[:3, 3], UR_ZERO[model], atol=1e-3)
     assert np.allclose(T[:3, 2], (0, 1, 0), atol=1e-6)  # tool z along +y of base_link
 
 
-def test_ur5e_random_configurations_match_dh(client):
-    info = MODEL_INFO["ur5e_robotiq"]
+@pytest.mark.parametrize("model", list(UR_DH))
+def test_ur_random_configurations_match_dh(client, model: str):
+    info = MODEL_INFO[model]
     body, links, joints = _load(client, info.name)
     Rz = np.diag([-1.0, -1.0, 1.0, 1.0])  # base_link -> controller base (pi about z)
     rng = np.random.default_rng(5)
@@ -167,18 +179,23 @@ def test_ur5e_random_configurations_match_dh(client):
         q = rng.uniform(-math.pi, math.pi, size=6)
         _set(client, body, joints, info.arm_joints, q)
         T = np.linalg.inv(_T(client, body, links["base_link"])) @ _T(client, body, links["tool0"])
-        R = Rz @ ur5e_dh(q)
+        R = Rz @ ur_dh(q, model)
         assert np.linalg.norm(T[:3, 3] - R[:3, 3]) < 1e-3
         assert np.allclose(T[:3, :3], R[:3, :3], atol=1e-4)
 
 
-def test_ur5e_limits_and_gripper(client):
-    info = MODEL_INFO["ur5e_robotiq"]
+@pytest.mark.parametrize("model", list(UR_DH))
+def test_ur_limits_and_gripper(client, model: str):
+    info = MODEL_INFO[model]
     body, links, joints = _load(client, info.name)
-    for n in info.arm_joints:
+    for n, speed in zip(info.arm_joints, UR_SPEED[model]):
         ji = p.getJointInfo(body, joints[n], physicsClientId=client)
         bound = math.pi if n == "elbow_joint" else 2 * math.pi
-        assert ji[8:10] == pytest.approx((-bound, bound)) and ji[11] == pytest.approx(math.pi), n
+        if n in UR_CONTINUOUS[model]:
+            assert ji[2] == p.JOINT_REVOLUTE and ji[8] > ji[9], n  # pybullet's continuous joint: 0 > -1
+        else:
+            assert ji[8:10] == pytest.approx((-bound, bound)), n
+        assert ji[11] == pytest.approx(speed), n
     # open: pad inner faces 85 mm apart; closed: touching; coupling 0.011 on the flange
     for width in (0.085, 0.04, 0.0):
         _set(client, body, joints, info.gripper_joints, info.width_to_q(width))

@@ -134,10 +134,10 @@ def test_the_arm_arrays_are_read_only() -> None:
 
 
 def test_the_registry_names_the_known_descriptions() -> None:
-    assert descriptions.names() == tuple(DESCRIPTIONS) == ("locobot_wx250s", "ur5e_robotiq")
+    assert descriptions.names() == tuple(DESCRIPTIONS) == ("locobot_wx250s", "ur5e_robotiq", "ur3e_robotiq")
     assert all(descriptions.get(n).name == n for n in descriptions.names())
     with pytest.raises(KeyError, match=r"unknown robot model 'locobot_wx200'; did you mean 'locobot_wx250s'\? "
-                                       r"\(known: locobot_wx250s, ur5e_robotiq\)"):
+                                       r"\(known: locobot_wx250s, ur5e_robotiq, ur3e_robotiq\)"):
         descriptions.get("locobot_wx200")
 
 
