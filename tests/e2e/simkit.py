@@ -6,6 +6,7 @@ at the end of every request (SIM-ONLY, for the assertions)."""
 from __future__ import annotations
 
 import io
+import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -20,6 +21,18 @@ from mmexec.executive.runner import ArgMark, Progress, Request, RequestResult, R
 REPO = Path(__file__).resolve().parents[2]
 MISSION = REPO / "trees" / "fetch_item.yaml"
 LOCOBOT_SIM = REPO / "config" / "locobot_sim.yaml"
+
+
+def log_records(log: Path, drop: Sequence[str] = ()) -> list[dict[str, Any]]:
+    """The records of the JSON-lines event log ``log``, in order, without the fields in
+    ``drop`` (wall-clock times, pids, paths: what differs between equal runs)."""
+    out = []
+    for line in log.read_text().splitlines():
+        rec = json.loads(line)
+        for k in drop:
+            rec.pop(k, None)
+        out.append(rec)
+    return out
 
 
 @dataclass

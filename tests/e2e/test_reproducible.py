@@ -6,12 +6,11 @@ clock time (see skills/fetch/arm.py off_tick)."""
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 from pathlib import Path
 
-from simkit import MISSION, REPO
+from simkit import MISSION, REPO, log_records
 
 #: wall-clock fields, which differ between two runs by nature
 WALL_FIELDS = ("started", "planning_ms", "pid", "argv", "log", "wall", "wall_s", "ended")
@@ -29,13 +28,7 @@ def _run(tmp_path: Path, name: str) -> list[dict]:
                           "--request", "item=5", "--log", str(log)],
                          capture_output=True, text=True, timeout=300, check=False)
     assert res.returncode == 0, res.stdout + res.stderr
-    out = []
-    for line in log.read_text().splitlines():
-        rec = json.loads(line)
-        for k in WALL_FIELDS:
-            rec.pop(k, None)
-        out.append(rec)
-    return out
+    return log_records(log, WALL_FIELDS)
 
 
 def test_the_same_seed_gives_the_same_event_log(tmp_path: Path) -> None:

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from simkit import log_records
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
@@ -51,13 +52,7 @@ CASES = (
 
 
 def _normalised(log: Path) -> list[dict]:
-    out = []
-    for line in log.read_text().splitlines():
-        rec = json.loads(line)
-        for k in VOLATILE:
-            rec.pop(k, None)
-        out.append(rec)
-    return out
+    return log_records(log, VOLATILE)
 
 
 def run_case(case: Case, tmp: Path) -> list[dict]:
