@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 from py_trees.common import Status
-from test_nodes_support import Harness
 
 import mmexec.skills.primitives  # noqa: F401  (registers the primitive skills the examples use)
 from mmexec.config.yamlload import InputError
@@ -14,11 +13,6 @@ from mmexec.executive.compiler import MAX_INCLUDE_DEPTH, load_mission
 from mmexec.skills.base import REGISTRY
 
 EXAMPLES = sorted((Path(__file__).resolve().parents[2] / "trees" / "examples").glob("*.yaml"))
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)

@@ -10,7 +10,6 @@ import shutil
 import py_trees
 import pydot
 import pytest
-from test_nodes_support import Harness
 
 from mmexec.executive import display
 
@@ -50,11 +49,6 @@ tree:
     - timeout: {retry: {skill: hold}, attempts: 3}
       seconds: 20
 """
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 def test_render_text_of_mission_and_ticked_tree(h):

@@ -12,11 +12,6 @@ from mmexec.executive.compiler import MissionTree
 S, F, R, I = Status.SUCCESS, Status.FAILURE, Status.RUNNING, Status.INVALID
 
 
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
-
-
 def _each_tick(h: Harness, t: MissionTree, key: str, limit: int = 20) -> tuple[list[Status], list[object]]:
     """Tick ``t`` until it finishes: the statuses, and blackboard key ``key`` after each tick."""
     statuses: list[Status] = []

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import pytest
 from py_trees.common import Status
-from test_nodes_support import Harness
 
 from mmexec.executive.values import (
     MAX_FORMAT_WIDTH,
@@ -20,11 +19,6 @@ from mmexec.executive.values import (
 )
 
 S, F = Status.SUCCESS, Status.FAILURE
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 # ------------------------------------------------------------------------ values

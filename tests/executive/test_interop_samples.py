@@ -22,7 +22,6 @@ from pathlib import Path
 
 import pytest
 from py_trees.common import Status
-from test_nodes_support import Harness
 
 from mmexec.executive.schema import NODE_TYPES, OPTIONS, RECOVERY_KEYS
 
@@ -174,11 +173,6 @@ def _sample_attr_values(tag: str, attr: str) -> list[str]:
             if attr in el.attrib:
                 vals.append(el.attrib[attr])
     return vals
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 def test_nav2_number_of_retries_is_max_recoveries(h):

@@ -4,16 +4,10 @@ from __future__ import annotations
 
 import pytest
 from py_trees.common import Status
-from test_nodes_support import Harness
 
 from mmexec.executive.nodes import NodeError
 
 S, F, R, I = Status.SUCCESS, Status.FAILURE, Status.RUNNING, Status.INVALID
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 def test_sequence_with_memory_resumes_running_child(h):

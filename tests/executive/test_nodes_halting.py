@@ -2,16 +2,9 @@
 
 from __future__ import annotations
 
-import pytest
 from py_trees.common import Status
-from test_nodes_support import Harness
 
 S, F, R, I = Status.SUCCESS, Status.FAILURE, Status.RUNNING, Status.INVALID
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 def test_reactive_sequence_guard_failure_halts_running_action_over_3_ticks(h):

@@ -8,7 +8,6 @@ import uuid
 import py_trees
 import pytest
 from py_trees.common import Status
-from test_nodes_support import Harness
 
 from mmexec.executive import nodes as N
 
@@ -28,11 +27,6 @@ tree:
         recovery: {skill: succeed}
         max_recoveries: 1
 """
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 def test_ids_are_unique_stable_uuids_and_parents_are_linked(h):

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 from py_trees.common import Status
-from test_nodes_support import Harness
 
 S, F, R, I = Status.SUCCESS, Status.FAILURE, Status.RUNNING, Status.INVALID
 
@@ -22,11 +21,6 @@ GIVE_UP = "give_up: {skill: script, name: go_home, params: {counter: give_up, ou
 
 def make(h, action, recovery="s", n=2, give_up=GIVE_UP):
     return h.tree(MISSION.format(action=action, recovery=recovery, n=n, give_up=give_up))
-
-
-@pytest.fixture
-def h(tmp_path):
-    return Harness(tmp_path)
 
 
 def runs(h, counter):
