@@ -4,9 +4,10 @@ reflector-enhanced AMCL (reflector-amcl-tracking-grasp 4.3.1; issue 11).
 ``.venv/bin/python benchmarks/localization.py [--world NAME_OR_PATH] [--runs N] [--seed S]
 [--goals G] [--beams B] [--range-noise F]``
 
-Method. The world's map and reflectors are written by ``mmexec.sim.mapgen`` and read back
-as a robot would (``load_map``, ``load_reflectors``). Each run builds the sim LoCoBot with
-the ``realistic`` odometry profile and the RPLIDAR A2 lidar model (``beams`` per scan,
+Method. The world's map and reflectors are written by ``mmexec.drivers.maps.write_map`` (as
+``python -m mmexec.sim.mapgen`` does) and read back as a robot would (``load_map``,
+``load_reflectors``). Each run builds the sim LoCoBot with the ``realistic`` odometry
+profile and the RPLIDAR A2 lidar model (``beams`` per scan,
 range noise ``F`` of the range, quality values), puts it at a random free pose and drives
 ``G`` random free goals: A* on the map inflated by the footprint, a path tracker on the
 TRUE pose (the estimators are measured, never used for control), a scan every 0.1 s of
@@ -19,12 +20,15 @@ compared with the truth: position error [m] and heading error [rad].
 
 Fault runs (same count, other seeds): ``kidnap`` at a random time between 15 and 25 s
 (to a random clear pose): the recovery time is the sim time from the kidnap until the
-estimate stays within 5 cm and 0.05 rad for good (to 30 s after it); ``reflector_dropout``
+estimate stays within 5 cm and 0.05 rad for good (to 30 s after it), for the two filters
+and for plain AMCL with ROS's suggested random-particle recovery (``recovery_alpha_slow``
+0.001, ``recovery_alpha_fast`` 0.1; off by default); ``reflector_dropout``
 of every reflector for 20 s from a random time between 15 and 25 s: the mean error per
 scan during the dropout and in the 20 s after it.
 
-Update time: wall time of each ``ParticleFilter.update`` that ran (motion above the
-filter's thresholds), in this process, with the particle count at that update. The last
+Update time: wall and process CPU time of each ``ParticleFilter.update`` that ran
+(motion above the filter's thresholds; while driving, nearly every scan), with the
+particle count at that update. On a shared machine the CPU time is the steadier figure. The last
 line is ``loc_mean_error_cm: X``, the enhanced filter's mean position error at the goals.
 """
 
@@ -44,13 +48,13 @@ from typing import Any
 import numpy as np
 
 from mmexec.drivers.interfaces import LaserScan, Pose2D
+from mmexec.drivers.maps import load_map, write_map
 from mmexec.sim.backend import SimRobot, build
-from mmexec.sim.mapgen import write_map
 from mmexec.sim.world import load_world
 from mmexec.skills.localization import AmclConfig, ParticleFilter, ReflectorMap, load_reflectors
 from mmexec.skills.localization.motion import wrap
 from mmexec.skills.navigation.astar import plan_path, simplify_path
-from mmexec.skills.navigation.grid import CostMap, inflate, load_map
+from mmexec.skills.navigation.grid import CostMap, inflate
 from mmexec.skills.navigation.tracker import PathTracker, TrackerConfig
 
 #: control period and scan period [s] of sim time; physics rate [Hz]
@@ -59,33 +63,37 @@ CONTROL_DT, SCAN_EVERY, PHYSICS_HZ = 0.05, 2, 60
 RECOVERED = (0.05, 0.05)
 ESTIMATORS = ("odometry", "amcl", "reflector amcl")
 FILTERS = ESTIMATORS[1:]
+#: the kidnap runs also measure plain AMCL with ROS's suggested random-particle recovery
+#: (off by default, as in ROS; see skills/localization/amcl.py)
+RECOVERY = "amcl, recovery on"
 
 
 @dataclass
 class Filters:
-    """The two particle filters fed side by side, and their update times [s] and particle
-    counts."""
+    """The particle filters fed side by side (name -> filter), and their update times [s]
+    and particle counts."""
 
-    plain: ParticleFilter
-    enhanced: ParticleFilter
-    times: dict[str, list[float]] = field(default_factory=lambda: {n: [] for n in FILTERS})
-    particles: dict[str, list[int]] = field(default_factory=lambda: {n: [] for n in FILTERS})
+    filters: dict[str, ParticleFilter]
+    times: dict[str, list[float]] = field(default_factory=dict)
+    cpu: dict[str, list[float]] = field(default_factory=dict)  #: process CPU time [s] of the same updates
+    particles: dict[str, list[int]] = field(default_factory=dict)
     fixes: int = 0  #: updates of the enhanced filter with a reflector fix (three or more matched)
 
     def feed(self, odom: Pose2D, scan: LaserScan) -> None:
         o = np.array([odom.x, odom.y, odom.theta])
-        for name, pf in (("amcl", self.plain), ("reflector amcl", self.enhanced)):
-            t = time.perf_counter()
+        for name, pf in self.filters.items():
+            t, c = time.perf_counter(), time.process_time()
             ran = pf.update(o, scan.ranges, scan.angles, scan.range_max, scan.intensities)
             if ran:
-                self.times[name].append(time.perf_counter() - t)
-                self.particles[name].append(len(pf.particles))
-                self.fixes += pf is self.enhanced and pf.last_fix is not None
+                self.times.setdefault(name, []).append(time.perf_counter() - t)
+                self.cpu.setdefault(name, []).append(time.process_time() - c)
+                self.particles.setdefault(name, []).append(len(pf.particles))
+                self.fixes += name == "reflector amcl" and pf.last_fix is not None
 
     def poses(self, odom: Pose2D) -> dict[str, np.ndarray]:
         """Each estimator's pose ``(x, y, theta)`` in ``map`` now."""
         out = {"odometry": np.array([odom.x, odom.y, odom.theta])}
-        for name, pf in (("amcl", self.plain), ("reflector amcl", self.enhanced)):
+        for name, pf in self.filters.items():
             m = pf.map_to_odom()
             x, y, _ = m @ np.array([odom.x, odom.y, 1.0])
             out[name] = np.array([x, y, math.atan2(m[1, 0], m[0, 0]) + odom.theta])
@@ -106,7 +114,7 @@ class Run:
     """One sim robot driving random goals with the filters fed on the way."""
 
     def __init__(self, world: str, seed: int, maps: tuple[Any, ReflectorMap], *, beams: int, range_noise: float,
-                 faults: dict[str, Any] | None = None) -> None:
+                 faults: dict[str, Any] | None = None, recovery: bool = False) -> None:
         section = {
             "robot": "locobot_wx250s", "world": world, "physics_hz": PHYSICS_HZ,
             "lidar": {"beams": beams, "noise": 0.002, "noise_fraction": range_noise, "quality": "rplidar_a2"},
@@ -124,13 +132,16 @@ class Run:
         assert scan is not None
         T = scan.T_base_lidar
         mount = (float(T[0, 3]), float(T[1, 3]), math.atan2(T[1, 0], T[0, 0]))
-        plain = ParticleFilter(grid, AmclConfig(reflectors=None), mount=mount, rng=np.random.default_rng(seed + 1))
-        enhanced = ParticleFilter(grid, AmclConfig(reflectors=refl.config()), reflectors=refl.positions, mount=mount,
-                                  rng=np.random.default_rng(seed + 2))
+        configs = {"amcl": AmclConfig(reflectors=None), "reflector amcl": AmclConfig(reflectors=refl.config())}
+        if recovery:
+            configs[RECOVERY] = AmclConfig(reflectors=None, recovery_alpha_slow=0.001, recovery_alpha_fast=0.1)
         guess = (start.x + self.rng.normal(0, 0.1), start.y + self.rng.normal(0, 0.1), start.theta + self.rng.normal(0, 0.1))
-        for pf in (plain, enhanced):
-            pf.initialise(guess)
-        self.filters = Filters(plain, enhanced)
+        filters = {}
+        for k, (name, cfg) in enumerate(configs.items()):
+            filters[name] = ParticleFilter(grid, cfg, reflectors=refl.positions, mount=mount,
+                                           rng=np.random.default_rng(seed + 1 + k))
+            filters[name].initialise(guess)
+        self.filters = Filters(filters)
         self.ticks = 0
         self.trace: list[tuple[float, dict[str, Error]]] = []  #: (sim time, errors) per scan
 
@@ -219,13 +230,13 @@ def kidnap_run(world: str, seed: int, maps: tuple[Any, ReflectorMap], **kw: Any)
     whose error was above :data:`RECOVERED` (inf: still above within 3 s of the run's end,
     30 s after the kidnap)."""
     t_k = float(np.random.default_rng(seed).uniform(15.0, 25.0))
-    run = Run(world, seed, maps, faults={"kidnap": {"at": t_k}}, **kw)
+    run = Run(world, seed, maps, faults={"kidnap": {"at": t_k}}, recovery=True, **kw)
     try:
         drive_until(run, t_k + 30.0)
     finally:
         run.close()
     out = {}
-    for name in FILTERS:
+    for name in (*FILTERS, RECOVERY):
         after = [(t, e[name]) for t, e in run.trace if t >= t_k]
         bad = [t for t, (d, h, *_) in after if d > RECOVERED[0] or h > RECOVERED[1]]
         if not bad:
@@ -279,6 +290,7 @@ def main(argv: list[str] | None = None) -> int:
           f"{100 * args.range_noise:g} % + 2 mm, rplidar_a2 quality; odometry 'realistic'")
     at_goals: list[dict[str, Error]] = []
     times: dict[str, list[float]] = {n: [] for n in FILTERS}
+    cpu: dict[str, list[float]] = {n: [] for n in FILTERS}
     counts: dict[str, list[int]] = {n: [] for n in FILTERS}
     missed = fixes = 0
     wall = time.perf_counter()
@@ -289,6 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         fixes += filters.fixes
         for n in FILTERS:
             times[n] += filters.times[n]
+            cpu[n] += filters.cpu[n]
             counts[n] += filters.particles[n]
     updates = len(times["reflector amcl"])
     print(f"\n{len(at_goals)} goals reached ({missed} not), {time.perf_counter() - wall:.0f} s wall; the enhanced "
@@ -304,10 +317,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:<16}{x:>6.2f}{y:>6.2f}{m:>7.2f}{med:>8.2f}{p95:>7.2f}{share:>8.2f}{hm:>9.4f}{hp95:>8.4f}")
     print()
     for n in FILTERS:
-        print(f"update time {n}: median {1e3 * statistics.median(times[n]):.2f} ms, p95 "
-              f"{1e3 * float(np.percentile(times[n], 95)):.2f} ms over {len(times[n])} updates "
+        print(f"update time {n}: median {1e3 * statistics.median(times[n]):.2f} ms wall "
+              f"({1e3 * statistics.median(cpu[n]):.2f} ms CPU), p95 {1e3 * float(np.percentile(times[n], 95)):.2f} ms "
+              f"wall over {len(times[n])} updates "
               f"({args.beams} beams; particles median {statistics.median(counts[n]):.0f}, max {max(counts[n])})")
-    rec: dict[str, list[float]] = {n: [] for n in FILTERS}
+    rec: dict[str, list[float]] = {n: [] for n in (*FILTERS, RECOVERY)}
     drop: dict[str, list[tuple[float, float]]] = {n: [] for n in ESTIMATORS}
     for i in range(args.runs):
         for n, t in kidnap_run(args.world, 1000 + args.seed + i, maps, **kw).items():
@@ -315,10 +329,10 @@ def main(argv: list[str] | None = None) -> int:
         for n, dd in dropout_run(args.world, 2000 + args.seed + i, maps, **kw).items():
             drop[n].append(dd)
     print()
-    for n in FILTERS:
-        ok = sorted(t for t in rec[n] if math.isfinite(t))
+    for n, ts in rec.items():
+        ok = sorted(t for t in ts if math.isfinite(t))
         spread = f", median {statistics.median(ok):.1f} s, max {ok[-1]:.1f} s" if ok else ""
-        print(f"kidnap recovery {n}: {len(ok)}/{len(rec[n])} runs back within {100 * RECOVERED[0]:g} cm and "
+        print(f"kidnap recovery {n}: {len(ok)}/{len(ts)} runs back within {100 * RECOVERED[0]:g} cm and "
               f"{RECOVERED[1]:g} rad for good{spread}")
     for n in ESTIMATORS:
         during, after = (float(np.mean([100 * dd[k] for dd in drop[n]])) for k in (0, 1))

@@ -6,7 +6,8 @@ the weights fed into AMCL):
 1. **Extraction** (:func:`extract_reflectors`): runs of consecutive beams whose return
    intensity is at least ``intensity_threshold`` are one reflector each; its centre is the
    circle of the known post radius fitted (Gauss-Newton) to the run's hit points, i.e. the
-   surface hits corrected outwards by the post radius.
+   surface hits corrected outwards by the post radius (one beam: ``pi/4`` of the radius
+   behind the hit, the mean depth of a post's surface under a beam at a random offset).
 2. **Template library** (:class:`TriangleLibrary`): every triangle of three map reflectors,
    its sides sorted longest first, the library sorted by the longest side (section 3.1.1).
 3. **Triangle matching** (:func:`match_reflectors`): each triangle of detected reflectors is
@@ -19,7 +20,8 @@ the weights fed into AMCL):
    ``atan2(y_i - y_G, x_i - x_G) - phi_i`` (the paper's case analysis is ``atan2``; a plain
    arithmetic mean breaks at +-pi).
 5. **Weights** (equations 3, 4, 6; :func:`position_weight`, :func:`orientation_score`):
-   ``omega_new = alpha * s * omega + beta * d`` with ``alpha = 154``, ``beta = 1``.
+   ``omega_new = alpha * s * omega + beta * d`` with ``alpha = 154``, ``beta = 1``, each
+   term normalised over the particle set (:mod:`.amcl`).
 
 Where the paper is ambiguous, and what we chose (also in docs/localization.md):
 
@@ -32,6 +34,14 @@ Where the paper is ambiguous, and what we chose (also in docs/localization.md):
   saying of what. We read ``s`` as the orientation score of a particle: the mean over the
   matched reflectors of a Gaussian (std ``sigma_bearing``) of the difference between the
   bearing at which the particle would see the reflector and the bearing observed.
+* Equation 6 gives no scale for omega, s and d. We normalise ``s * omega`` and ``d`` over
+  the particle set before mixing them, so ``alpha : beta`` is the share of the weight
+  each carries whatever the particle count and spreads (:mod:`.amcl`).
+* Equations 7 and 8 add a new particle around the fix with probability ``d_i`` where
+  ``d_i > 0.01``, a figure that depends on the units of equation 3. We replace a fixed
+  share, ``inject_fraction``, of the resampled set by particles drawn around the fix.
+* A post is not always two beams wide: at 0.9 degrees a 5 cm post is one beam beyond
+  3.2 m, and the lab's three posts are then one beam each. ``min_beams`` is 1.
 
 Frames: detections are in the lidar frame (x forward, CCW angles); map reflectors and
 robot poses in ``map``.
