@@ -4,8 +4,10 @@ Each :class:`~mmexec.sim.world.Person` of a world (its ``people:`` section, or d
 the ``crowd`` fault, :func:`mmexec.sim.faults.crowd_people`) becomes a massless pybullet
 cylinder that the lidar and the camera see and the base's bumper feels
 (:class:`mmexec.sim.capabilities.SimBase`). :meth:`SimPeople.step` moves them every
-physics substep, as the base is moved: no physics acts on them and they act on nothing
-(no forces: an arm or an item touching one is blocked by a body of infinite mass).
+physics substep, as the base is moved: no physics acts on them. They push items (a body
+of infinite mass) but pass through the arm: a person moved into a holding arm would
+throw its joints about, which no real person does; an arm touching a person is found by
+the ground truth instead (:mod:`mmexec.sim.truth`).
 
 A person's walk, per substep of ``dt`` seconds:
 
@@ -17,8 +19,11 @@ A person's walk, per substep of ``dt`` seconds:
 
 People are polite: a person stands still for the substep when the step would bring them
 closer than :data:`YIELD_GAP` to the robot's footprint circle (and closer than they are),
-so they never walk into the robot; a contact with a person is the robot's doing. People
-do not avoid each other (they may overlap; neither the lidar nor the robot minds).
+so they never walk into the robot; a contact with a person is the robot's doing. A
+person kept waiting for :data:`PATIENCE` seconds turns round and walks their loop the
+other way (someone the robot waits for, and who waits for the robot, would otherwise
+stand there for ever). People do not avoid each other (they may overlap; neither the
+lidar nor the robot minds).
 
 Frames: ``map``; metres, seconds. Sim-only; skills never see this module.
 """
@@ -32,13 +37,16 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from mmexec.sim.scene import GROUP_ARM, GROUP_ITEM, GROUP_QUERY, GROUP_STATIC
+from mmexec.sim.scene import GROUP_ITEM, GROUP_QUERY, GROUP_STATIC
 from mmexec.sim.world import Person
 
 __all__ = ["YIELD_GAP", "SimPeople", "Walk"]
 
 #: [m] the smallest gap a person leaves between themselves and the robot's footprint circle
-YIELD_GAP = 0.1
+#: (more than the robot's own safety margin, so a person who waits is never inside it)
+YIELD_GAP = 0.3
+#: [s] how long a person waits for the robot before turning round
+PATIENCE = 3.0
 #: RGBA of a person's body (a dark blue coat: a distinct colour in camera frames)
 _COLOUR = (0.15, 0.2, 0.45, 1.0)
 
@@ -46,14 +54,18 @@ _COLOUR = (0.15, 0.2, 0.45, 1.0)
 @dataclass
 class Walk:
     """Where one person is in their walk: ``phase`` (``trigger``, ``delay``, ``walk`` or
-    ``pause``), the leg (from waypoint ``leg`` to the next), ``along`` [m] on it, the
-    seconds left of the delay or pause (``timer``), the position ``xy`` [m] in ``map``."""
+    ``pause``), the leg (from waypoint ``leg`` to the next), ``along`` [m] on it from
+    waypoint ``leg``, the seconds left of the delay or pause (``timer``), the position
+    ``xy`` [m] in ``map``, the ``direction`` along the loop (+1 as given, -1 reversed)
+    and how long they have been ``waiting`` for the robot [s]."""
 
     phase: str
     leg: int
     along: float
     timer: float
     xy: tuple[float, float]
+    direction: int = 1
+    waiting: float = 0.0
 
 
 class SimPeople:
@@ -77,8 +89,7 @@ class SimPeople:
                                       physicsClientId=cid)
             x, y = pe.waypoints[0]
             body = p.createMultiBody(0.0, col, vis, [x, y, pe.height / 2], physicsClientId=cid)
-            p.setCollisionFilterGroupMask(body, -1, GROUP_STATIC, GROUP_QUERY | GROUP_ITEM | GROUP_ARM,
-                                          physicsClientId=cid)
+            p.setCollisionFilterGroupMask(body, -1, GROUP_STATIC, GROUP_QUERY | GROUP_ITEM, physicsClientId=cid)
             self.bodies.append(body)
         self._placed = [w.xy for w in self.walks]
 
@@ -129,11 +140,16 @@ class SimPeople:
               robot_radius: float) -> None:
         """One substep of walking for person ``i`` (the rules of the module docstring)."""
         legs = self._legs[i]
-        along, leg = w.along + pe.speed * dt, w.leg
-        arrived = along >= legs[leg][2] - 1e-9
-        if arrived:
+        leg = w.leg
+        along = w.along + w.direction * pe.speed * dt
+        arrived = along >= legs[leg][2] - 1e-9 if w.direction > 0 else along <= 1e-9
+        if arrived and w.direction > 0:
             leg, along = (leg + 1) % len(legs), 0.0
             xy = legs[leg][0]
+        elif arrived:  # reversed: at waypoint ``leg``, next down the previous leg from its end
+            xy = legs[leg][0]
+            leg = (leg - 1) % len(legs)
+            along = legs[leg][2]
         else:
             (ax, ay), (bx, by), length = legs[leg]
             f = along / length
@@ -142,8 +158,11 @@ class SimPeople:
         gap_new = math.hypot(xy[0] - rx, xy[1] - ry) - pe.radius - robot_radius
         if gap_new < YIELD_GAP:
             gap_now = math.hypot(w.xy[0] - rx, w.xy[1] - ry) - pe.radius - robot_radius
-            if gap_new < gap_now:
-                return  # stand aside: the robot is in the way
-        w.xy, w.leg, w.along = xy, leg, along
+            if gap_new < gap_now:  # stand aside: the robot is in the way
+                w.waiting += dt
+                if w.waiting >= PATIENCE:
+                    w.direction, w.waiting = -w.direction, 0.0
+                return
+        w.xy, w.leg, w.along, w.waiting = xy, leg, along, 0.0
         if arrived and pe.pause > 0:
             w.phase, w.timer = "pause", pe.pause

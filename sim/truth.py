@@ -28,6 +28,7 @@ something the base can touch), as for the bumper itself.
 
 from __future__ import annotations
 
+import itertools
 import json
 import logging
 import math
@@ -101,6 +102,18 @@ def truth_log_path(template: str, config_mark: Mark, seed: int | None) -> Path:
     return path if path.is_absolute() else folder / path
 
 
+def _reach(core: SimCore, arm_links: frozenset[int]) -> float:
+    """A radius [m] round the base centre that holds the arm at any pose: the distance to
+    the arm's first link plus the length of the chain to the tool, measured now."""
+    core.sync()
+    if not arm_links:
+        return 0.0
+    base = np.array([core.true_pose.x, core.true_pose.y, 0.0])
+    pos = [np.array(p.getLinkState(core.body, i, physicsClientId=core.cid)[4]) for i in sorted(arm_links)]
+    chain = sum(float(np.linalg.norm(b - a)) for a, b in itertools.pairwise(pos))
+    return float(np.linalg.norm((pos[0] - base)[:2])) + chain + 0.1
+
+
 class TruthLog:
     """Writes the ground-truth sidecar of one run (see the module docstring). Create with
     :func:`open_truth_log`; :meth:`sample` once per control tick; :meth:`close` at the end."""
@@ -112,6 +125,7 @@ class TruthLog:
         self._radius = footprint_radius
         self._static = StaticFootprints(world, z_range)
         self._arm_links = arm_links
+        self._reach = _reach(core, arm_links)  # [m] radius round the base holding the arm at any pose
         self._seen_contacts = len(core.contacts)
         self._arm_touching: frozenset[tuple[int, int]] = frozenset()
         self.ticks = 0
@@ -136,16 +150,25 @@ class TruthLog:
                     pose=[round(c.pose.x, 4), round(c.pose.y, 4), round(c.pose.theta, 4)])
 
     def _arm_contacts(self, now: float, pose: Pose2D) -> None:
-        """Arm links touching static geometry or a person in the last physics step, each
-        new touching pair once."""
+        """Arm links touching static geometry in the last physics step, or overlapping a
+        person now (people pass through the arm: :mod:`mmexec.sim.people`), each new
+        touching pair once."""
         core = self._core
-        others = {core.scene.static: None}
-        if core.people is not None:
-            others.update({b: k for k, b in enumerate(core.people.bodies)})
+        others: dict[int, int | None] = {core.scene.static: None}
         touching: set[tuple[int, int]] = set()
-        for pt in p.getContactPoints(bodyA=core.body, physicsClientId=core.cid):
-            if pt[2] in others and pt[3] in self._arm_links and pt[8] < 0.0:
+        for pt in p.getContactPoints(bodyA=core.body, bodyB=core.scene.static, physicsClientId=core.cid):
+            if pt[3] in self._arm_links and pt[8] < 0.0:
                 touching.add((pt[2], pt[4]))
+        people = core.people
+        if people is not None and len(people):
+            core.sync()
+            for k in np.flatnonzero(people.gaps(pose.x, pose.y, self._reach) < 0.0):
+                others[people.bodies[k]] = int(k)
+                for link in self._arm_links:
+                    if any(pt[8] < 0.0 for pt in p.getClosestPoints(core.body, people.bodies[k], 0.0, linkIndexA=link,
+                                                                     physicsClientId=core.cid)):
+                        touching.add((people.bodies[k], -1))
+                        break
         for body, link in sorted(touching - self._arm_touching):
             k = others[body]
             if k is not None:

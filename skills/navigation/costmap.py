@@ -24,6 +24,11 @@ Per scan (:meth:`RollingCostmap.update`):
    exact Euclidean; skipped without marks) and combined by the minimum with the static
    map's distance field, computed once: exact near the window's edge too.
 
+**Pinned marks** (:meth:`RollingCostmap.pin`): cells a contact sensor found (a bumper,
+a cliff sensor) that the planar lidar may not see (a box below the scan plane, a drop).
+The lidar's clearing never removes them; they roll with the window and leave it like
+any mark, or go with :meth:`RollingCostmap.unpin`.
+
 :meth:`RollingCostmap.clearance_at` answers for any map points: the distance from the
 point to the nearest obstacle cell's edge, i.e. the centre-to-centre distance field
 interpolated bilinearly at the point, less half a cell: within half a cell (2.5 cm at 5
@@ -155,6 +160,7 @@ class RollingCostmap:
         self.n = max(3, math.ceil(self.config.size / static.resolution))
         self.r0 = self.c0 = 0
         self.marks = np.zeros((self.n, self.n), dtype=bool)
+        self.pinned = np.zeros((self.n, self.n), dtype=bool)
         self._static_win = np.zeros((self.n, self.n))
         self.clearance = np.zeros((self.n, self.n))
         self._placed = False
@@ -188,7 +194,7 @@ class RollingCostmap:
         r0, c0 = int(row) - self.n // 2, int(col) - self.n // 2
         if self._placed and (r0, c0) == (self.r0, self.c0):
             return False
-        marks = np.zeros_like(self.marks)
+        marks, pinned = np.zeros_like(self.marks), np.zeros_like(self.pinned)
         if self._placed:
             dr, dc = r0 - self.r0, c0 - self.c0
             src_r = slice(max(0, dr), min(self.n, self.n + dr))
@@ -197,7 +203,8 @@ class RollingCostmap:
             dst_c = slice(max(0, -dc), min(self.n, self.n - dc))
             if src_r.start < src_r.stop and src_c.start < src_c.stop:
                 marks[dst_r, dst_c] = self.marks[src_r, src_c]
-        self.marks = marks
+                pinned[dst_r, dst_c] = self.pinned[src_r, src_c]
+        self.marks, self.pinned = marks, pinned
         self.r0, self.c0 = r0, c0
         self._placed = True
         # the static distance field over the window (0 off the map: no driving there)
@@ -225,6 +232,7 @@ class RollingCostmap:
             d = np.hypot(centres[:, 0] - ox, centres[:, 1] - oy)
             beam, ok = points.beam_towards(centres)
             seen_free = ok & (np.minimum(points.free[beam], cfg.clear_range) > d + 0.5 * res) & (d > res)
+            seen_free &= ~self.pinned[mi, mj]
             self.marks[mi[seen_free], mj[seen_free]] = False
         # marking: hits that are not the static map
         xy = np.where(points.hit[:, None], points.xy, 0.0)
@@ -253,9 +261,24 @@ class RollingCostmap:
             self.clearance = self._static_win.copy()
 
     def clear_marks(self) -> None:
-        """Forget every mark (e.g. after a recovery re-localised the robot)."""
+        """Forget every mark, pinned ones too (e.g. after a recovery re-localised the robot)."""
         self.marks[:] = False
+        self.pinned[:] = False
         self._refresh()
+
+    def pin(self, xy: np.ndarray) -> int:
+        """Mark the cells holding the map points ``xy`` (m, 2) [m] as obstacles the lidar's
+        clearing never removes (what a bumper or cliff sensor found); returns how many
+        points fell inside the window (the others are dropped)."""
+        i, j, inside = self.window_cells(np.asarray(xy, dtype=float).reshape(-1, 2))
+        self.pinned[i[inside], j[inside]] = True
+        self.marks |= self.pinned
+        self._refresh()
+        return int(inside.sum())
+
+    def unpin(self) -> None:
+        """Let the lidar clear the pinned cells again (they stay marked until it does)."""
+        self.pinned[:] = False
 
     # ------------------------------------------------------------------ queries
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:

@@ -11,7 +11,10 @@ tick (it never blocks, never reads a clock and never talks to a device):
    filter's look-ahead ``l`` (the zone the filter guards; a DWA that planned into it
    would only be stopped by the filter), people moved at their tracked velocity;
 4. the CLF-CBF filter makes ``u_ref`` safe against *every* circle, tracking the pose the
-   DWA's rollout reaches ``reference_time`` seconds ahead.
+   DWA's rollout reaches ``reference_time`` seconds ahead. It may slow the base and steer
+   it, but never drive it faster than the DWA's command: the filter sees only the
+   circles, and a faster command (fleeing someone who walks up from behind) is one the
+   costmap never checked; when slowing and steering cannot keep every barrier, it brakes.
 
 The caller acts on the DWA status and ``path_blocked`` (re-plan globally on
 :meth:`LocalPlanner.replan_grid`; recover when ``STUCK``).
@@ -182,7 +185,7 @@ class LocalPlanner:
                 k = min(d.trajectory.shape[0], max(1, round(cfg.reference_time / cfg.dwa.step))) - 1
                 x, y, th = d.trajectory[k]
                 reference = Pose2D(float(x), float(y), float(th))
-            f = self.cbf.filter(pose, (d.v, d.w), reference, circles, u0, dt, scale * cfg.limits.max_v)
+            f = self.cbf.filter(pose, (d.v, d.w), reference, circles, u0, dt, min(scale * cfg.limits.max_v, max(d.v, 0.0)))
             v, w = f.v, f.w
         self._u = (v, w)
         return LocalCommand(v, w, d, f, circles, scale)

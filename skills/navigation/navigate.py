@@ -1,6 +1,10 @@
 """Base navigation skills: grid A* on the robot's occupancy map inflated by its radius,
 then pure-pursuit path tracking within velocity and acceleration limits
 (:mod:`mmexec.skills.navigation`); turning in place and backing off in a straight line.
+With ``nav.local_planner: true`` the A* path is followed by the local planner instead: the
+DWA on the rolling lidar costmap and the CLF-CBF safety filter, with re-plans, recoveries
+and the bumper/cliff contact recovery (:mod:`mmexec.skills.navigation.local_drive`; it
+needs a lidar).
 
 Skills: ``navigate`` (to a named base pose or x/y/theta) and ``back_off`` (straight
 backwards). The building blocks other skills use: :func:`drive_path`, :func:`rotate_by`,
@@ -13,8 +17,10 @@ rest again.
 
 Settings: the profile's ``nav:`` section (:class:`NavSettings`: speed and acceleration
 limits, the map's extra inflation, goal tolerances, the default timeout, and the
-stand-off settings ``approach`` reads). World model: the inflated map under
-``nav.costmap``.
+stand-off settings ``approach`` reads; the local planner's switch and its recovery
+settings). World model: the inflated map under ``nav.costmap``; the path being followed
+under ``nav.path`` (``[[x, y], ...]`` in ``map``, for the live console; empty between
+drives), tracked people under ``nav.people`` (local planner).
 """
 
 from __future__ import annotations
@@ -45,6 +51,10 @@ from mmexec.skills.navigation import (
     plan_path,
     simplify_path,
 )
+from mmexec.skills.navigation.dwa import DwaConfig
+from mmexec.skills.navigation.limits import BaseLimits
+from mmexec.skills.navigation.local_drive import WORLD_PATH, LocalDrive, LocalDriveConfig
+from mmexec.skills.navigation.local_planner import LocalPlannerConfig
 from mmexec.skills.poses import base_pose
 from mmexec.skills.primitives import Step, motion_loop
 from mmexec.skills.profile import PROFILE, declare_settings, setting
@@ -99,6 +109,17 @@ class NavSettings:
     redetect_at_standoff: bool = setting(False, doc=(
         "approach: look at the marker once more from the stand-off pose reached and keep that estimate "
         "(for a pick)"))
+    local_planner: bool = setting(False, doc=(
+        "follow the A* path with the DWA local planner on the rolling lidar costmap and the CLF-CBF safety "
+        "filter (re-plans around what the map does not show, recovers when stuck, backs off from a bumper or "
+        "cliff contact; needs a lidar); false: pure pursuit on the static map"))
+    replan_interval: float = setting(1.0, unit="clock s", gt=0, doc=(
+        "local planner: least time between two global re-plans while the path ahead is blocked"))
+    recoveries: int = setting(3, ge=0, doc=(
+        "local planner: recoveries when stuck (turn once round, back off, re-plan), and bumper or cliff "
+        "contacts, before a drive fails"))
+    recovery_back_off: float = setting(0.2, unit="m", ge=0, doc=(
+        "local planner: how far a recovery or a contact backs off (less where the costmap leaves less room)"))
 
     def validate(self) -> list[str]:
         """Checks that relate several settings (single-value ranges are declared)."""
@@ -161,34 +182,48 @@ def _tracker_config(ctx: SkillContext, base: Base, max_v: float | None) -> Track
     )
 
 
+def local_drive_config(ctx: SkillContext, base: Base, max_v: float | None) -> LocalDriveConfig:
+    """The local planner's configuration from the profile's ``nav:`` section, within the
+    base's own limits (``max_v`` [m/s]: a lower speed limit for this motion): the
+    footprint radius, the margin, the goal tolerance of the DWA, the recovery settings."""
+    nav = nav_settings(ctx)
+    limits = BaseLimits(radius=base.radius, max_v=min(max_v or nav.max_v, base.max_linear),
+                        max_w=min(nav.max_w, base.max_angular), accel_v=min(nav.accel_v, base.max_linear_accel),
+                        accel_w=min(nav.accel_w, base.max_angular_accel))
+    planner = LocalPlannerConfig.for_base(limits, nav.margin, dwa=DwaConfig(goal_tolerance=nav.goal_tolerance))
+    return LocalDriveConfig(planner=planner, margin=nav.margin, tracker=_tracker_config(ctx, base, max_v),
+                            replan_interval=nav.replan_interval,
+                            recoveries=nav.recoveries, back_off=nav.recovery_back_off,
+                            heading_tolerance=nav.heading_tolerance, goal_search=nav.goal_search)
+
+
 def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, max_v: float | None = None,
                path: list[tuple[float, float]] | None = None) -> Generator[None, None, Pose2D]:
     """Plan (A*, unless ``path`` is given) from the base's pose to ``goal`` and track the
-    path, ending at ``goal.theta``. Emits base states. Failures: PLANNING "no path to
-    LABEL"; EXECUTION on a base fault (bumper, cliff, link) or after ``timeout`` clock
-    seconds. Cancellation brakes the base before re-raising. Returns the pose reached."""
+    path, ending at ``goal.theta``; with ``nav.local_planner`` follow it with the local
+    planner (:class:`~mmexec.skills.navigation.local_drive.LocalDrive`). Emits base states
+    and publishes the path under ``nav.path``. Failures: PLANNING "no path to LABEL";
+    EXECUTION on a base fault (bumper, cliff, link; with the local planner only once its
+    contact recoveries are spent) or after ``timeout`` clock seconds; PRECONDITION for the
+    local planner without a lidar. Cancellation brakes the base before re-raising.
+    Returns the pose reached."""
     base = ctx.robot.base
     if base is None:
         raise SkillFailure(FailureKind.PRECONDITION, "navigation needs a base, and this robot has none")
     cm = costmap(ctx)
+    if nav_settings(ctx).local_planner:
+        lidar = ctx.robot.lidar
+        if lidar is None:
+            raise SkillFailure(FailureKind.PRECONDITION,
+                               "nav.local_planner needs a lidar, and this robot has none (set it false in the profile)")
+        if path is None:
+            goal = _free_goal(ctx, cm, goal, label)
+        drive = LocalDrive(ctx, base, lidar, goal, label, config=local_drive_config(ctx, base, max_v), static=cm,
+                           timeout=timeout, path=path, status=base_status)
+        return (yield from drive.run())
     start = base.state().pose
     if path is None:
-        search = nav_settings(ctx).goal_search
-        free = cm.nearest_free(goal.x, goal.y, search) if search > 0 else None
-        if free is not None and (free[0], free[1]) != (goal.x, goal.y):
-            moved = Pose2D(free[0], free[1], goal.theta)
-            log.info("%s: goal (%.2f, %.2f) is in collision; using (%.2f, %.2f), %.2f m away",
-                     label, goal.x, goal.y, moved.x, moved.y, goal.distance_to(moved))
-            ctx.emit("goal_adjusted", label=label, goal=[round(goal.x, 3), round(goal.y, 3)],
-                     used=[round(moved.x, 3), round(moved.y, 3)], shift=round(goal.distance_to(moved), 3),
-                     node=ctx.node_path)
-            goal = moved
-        if not cm.is_free(goal.x, goal.y):
-            base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="goal in collision")
-            base_status(ctx, "idle")
-            raise SkillFailure(FailureKind.PLANNING,
-                               f"no path to {label}: goal ({goal.x:.2f}, {goal.y:.2f}) is in collision or off the map"
-                               + (f", and no free point lies within {search:g} m" if search > 0 else ""))
+        goal = _free_goal(ctx, cm, goal, label)
         path = plan_path(cm, (start.x, start.y), (goal.x, goal.y))
         if path is None:
             base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="no path")
@@ -197,6 +232,7 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
         path = simplify_path(cm, path)
     # the grid path runs between cell centres: start and end exactly where the base and goal are
     path = [(start.x, start.y)] + list(path[1:-1]) + [(goal.x, goal.y)] if len(path) > 1 else [(goal.x, goal.y)]
+    ctx.world[WORLD_PATH] = [[float(x), float(y)] for x, y in path]
     tracker = PathTracker(path, _tracker_config(ctx, base, max_v), goal_heading=goal.theta)
     base_status(ctx, "to_goal", goal=[round(goal.x, 3), round(goal.y, 3), round(goal.theta, 3)], label=label)
     t_end = ctx.clock.now() + timeout
@@ -220,7 +256,30 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
         base_status(ctx, "goal_ok", pose=[round(reached.x, 3), round(reached.y, 3), round(reached.theta, 3)])
         return reached
     finally:
+        ctx.world[WORLD_PATH] = []
         base_status(ctx, "idle")
+
+
+def _free_goal(ctx: SkillContext, cm: CostMap, goal: Pose2D, label: str) -> Pose2D:
+    """``goal``, or the nearest free point within ``nav.goal_search`` when the inflated map
+    ``cm`` covers it (``goal_adjusted``); PLANNING failure when neither is free."""
+    search = nav_settings(ctx).goal_search
+    free = cm.nearest_free(goal.x, goal.y, search) if search > 0 else None
+    if free is not None and (free[0], free[1]) != (goal.x, goal.y):
+        moved = Pose2D(free[0], free[1], goal.theta)
+        log.info("%s: goal (%.2f, %.2f) is in collision; using (%.2f, %.2f), %.2f m away",
+                 label, goal.x, goal.y, moved.x, moved.y, goal.distance_to(moved))
+        ctx.emit("goal_adjusted", label=label, goal=[round(goal.x, 3), round(goal.y, 3)],
+                 used=[round(moved.x, 3), round(moved.y, 3)], shift=round(goal.distance_to(moved), 3),
+                 node=ctx.node_path)
+        goal = moved
+    if not cm.is_free(goal.x, goal.y):
+        base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="goal in collision")
+        base_status(ctx, "idle")
+        raise SkillFailure(FailureKind.PLANNING,
+                           f"no path to {label}: goal ({goal.x:.2f}, {goal.y:.2f}) is in collision or off the map"
+                           + (f", and no free point lies within {search:g} m" if search > 0 else ""))
+    return goal
 
 
 def rotate_by(ctx: SkillContext, angle: float, *, timeout: float = 20.0) -> Generator[None, None, Pose2D]:
@@ -326,8 +385,9 @@ def _goal_from_params(ctx: SkillContext, goal: str | None, x: float | None, y: f
 def navigate(ctx: SkillContext, goal: str | None = None, x: float | None = None, y: float | None = None,
              theta: float | None = None, max_speed: float | None = None, timeout: float | None = None) -> SkillGen:
     """Drive the base to a named pose or x/y/theta: A* on the occupancy map inflated by
-    the robot radius, then path tracking. PLANNING "no path to ..." when A* finds none;
-    EXECUTION on a bumper or other base fault, or on timeout."""
+    the robot radius, then path tracking (with ``nav.local_planner``: the local planner,
+    which re-plans, recovers and backs off from contacts). PLANNING "no path to ..." when
+    A* finds none; EXECUTION on a bumper or other base fault, or on timeout."""
     pose, label = _goal_from_params(ctx, goal, x, y, theta)
     limit = timeout if timeout is not None else nav_settings(ctx).timeout
     reached = yield from drive_path(ctx, pose, label, timeout=limit, max_v=max_speed)

@@ -26,7 +26,7 @@ from mmexec.sim.faults import (
     world_extras,
 )
 from mmexec.sim.mapgen import scene_yaml, world_map
-from mmexec.sim.people import YIELD_GAP, SimPeople
+from mmexec.sim.people import PATIENCE, YIELD_GAP, SimPeople
 from mmexec.sim.world import Person, load_world
 
 ROOM = """name: hall
@@ -162,19 +162,27 @@ def test_a_triggered_person_waits_for_the_robot_then_the_delay():
         p.disconnect(cid)
 
 
-def test_a_person_gives_way_to_the_robot():
+def test_a_person_gives_way_to_the_robot_then_turns_round():
     """Walking straight at a robot standing in the way, a person stops YIELD_GAP short of
-    its footprint and walks on once it has gone."""
+    its footprint, waits PATIENCE seconds and walks back; with the robot gone they walk on."""
     import pybullet as p
 
     cy = Person("cy", ((0.5, 1.0), (4.0, 1.0)), speed=1.0, radius=0.2)
-    sp, cid = _people([cy], robot=(2.5, 1.0), seconds=5.0)
+    gap_at = 2.5 - 0.178 - YIELD_GAP - 0.2  # where the person stops [m]
+    sp, cid = _people([cy], robot=(2.5, 1.0), seconds=(gap_at - 0.5) + PATIENCE - 0.1)
     try:
         gap = float(sp.gaps(2.5, 1.0, 0.178)[0])
         assert YIELD_GAP <= gap <= YIELD_GAP + 0.02  # a step (1.7 cm) short of coming closer
-        for _ in range(60):
+        for _ in range(round(1.1 * 60)):  # patience spent: 1 s walking back
+            sp.step(1 / 60, (2.5, 1.0), 0.178)
+        assert sp.walks[0].direction == -1 and sp.positions()[0][0] == pytest.approx(gap_at - 1.0, abs=0.05)
+    finally:
+        p.disconnect(cid)
+    sp, cid = _people([cy], robot=(2.5, 1.0), seconds=gap_at)
+    try:
+        for _ in range(60):  # the robot moves away: on they walk
             sp.step(1 / 60, (2.5, 3.0), 0.178)
-        assert sp.positions()[0][0] > 2.5
+        assert sp.walks[0].direction == 1 and sp.positions()[0][0] > gap_at + 0.9
     finally:
         p.disconnect(cid)
 

@@ -1,0 +1,641 @@
+"""Path following with the local planner: how ``navigate``, ``approach`` and ``search``
+drive the base when the robot profile sets ``nav.local_planner: true``.
+
+The global A* path (on the static map inflated by the footprint radius and ``nav.margin``)
+is followed by :class:`~mmexec.skills.navigation.local_planner.LocalPlanner`: the DWA on
+the rolling lidar costmap, then the CLF-CBF filter against the tracked obstacle circles
+(docs/algorithms.md, "Local navigation"). Per control tick, never blocking:
+
+1. the base's state: a bumper or cliff fault starts the *contact recovery* (below); any
+   other fault brakes and fails (EXECUTION), as the plain drive does;
+2. the newest lidar scan, when its stamp is new, updates the costmap and the tracks;
+3. one :meth:`LocalPlanner.step` gives the command;
+4. the DWA's reports are acted on:
+
+   * **path blocked** (by anything but a person: people move on) -> a global re-plan:
+     A* on the static map with the costmap's marks and the non-person circles written in
+     (:meth:`LocalPlanner.replan_grid`), inflated as the static map is, at most every
+     ``nav.replan_interval`` seconds; a re-plan that finds no way keeps the old path (the
+     DWA stops in front of the obstacle and the stuck recovery takes over);
+   * **stuck** (no progress along the path for the DWA's ``stuck_time``) -> *recovery*:
+     brake, turn in place once round (the lidar clears the marks of what has moved away
+     and sees what is around), back off ``nav.recovery_back_off`` where the costmap and
+     the circles leave room behind, re-plan; after ``nav.recoveries`` of them the drive
+     fails: EXECUTION "stuck on the way to ..." or, when no way was found at the last
+     re-plan, PLANNING "no path to ...: blocked by obstacles the map does not show";
+   * **goal reached** -> brake, turn to the goal heading, done.
+
+**Docking.** Within ``dock_distance`` of the goal, along a straight way the costmap shows
+clear, the drive hands over to the plain drive's pure-pursuit tracker (then its heading
+alignment), its command still passed through the CLF-CBF filter against the tracked
+circles (which may slow it or steer it, never speed it up): a stand-off in front of a shelf or the depot lies closer to the furniture than
+the DWA's clearance term likes (it stops short, in a local minimum of its score), and a
+pick needs the stand-off to the tolerance the tracker reaches. Docking ends back in the
+DWA (with a re-plan) when something appears on that straight way.
+
+**Contact recovery** (``bumper_*``, ``cliff_*``): stop; pin the contact in the local
+costmap (an arc just outside the footprint at the sensor's bearing: the lidar cannot clear
+it, since what the bumper felt may be below the scan plane); back off; re-plan. More than
+``nav.recoveries`` contacts in one drive fail it (EXECUTION, naming the faults), and so
+does a bumper that stays pressed while the base tries to back off (the Kobuki driver
+refuses motion while one is).
+
+For the live console the drive publishes the path it follows under ``nav.path`` (a new
+list of ``[x, y]`` [m] each time it is planned; empty when the drive ends) and the tracked
+people under ``nav.people`` (``{"id", "x", "y", "vx", "vy"}`` in ``map`` [m, m/s]). Event
+log records: ``nav_plan`` (why, the path's points and length), ``nav_tick`` (each tick:
+estimated pose, the command sent and the DWA's, the smallest barrier value ``h`` [m^2]
+over the circles, how many barriers bound, the DWA status, the social speed scale, the
+tracked people), ``nav_recovery`` and ``nav_contact``.
+
+Frames: ``map``; m, rad, s. Nothing here reads the simulator's ground truth.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from collections.abc import Callable, Generator
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from mmexec.drivers.geometry import wrap_angle
+from mmexec.drivers.interfaces import BLIND_FAULTS, Base, LaserScan, Lidar, OccupancyGrid, Pose2D
+from mmexec.skills.base import FailureKind, SkillCancelled, SkillContext, SkillFailure
+from mmexec.skills.navigation.astar import plan_path, simplify_path
+from mmexec.skills.navigation.cbf import QpStatus
+from mmexec.skills.navigation.dwa import DwaStatus
+from mmexec.skills.navigation.grid import CostMap, inflate
+from mmexec.skills.navigation.local_planner import LocalCommand, LocalPlanner, LocalPlannerConfig
+from mmexec.skills.navigation.obstacles import Circles
+from mmexec.skills.navigation.tracker import PathTracker, TrackerConfig
+from mmexec.skills.primitives import brake
+
+__all__ = [
+    "CONTACT_BEARINGS",
+    "WORLD_LOCAL_PLANNER",
+    "WORLD_PATH",
+    "WORLD_PEOPLE",
+    "LocalDrive",
+    "LocalDriveConfig",
+    "contact_points",
+    "local_planner",
+]
+
+log = logging.getLogger(__name__)
+
+#: ``ctx.world`` keys: the path being followed (the live console draws it), the tracked
+#: people, and the run's local planner (its costmap and tracks outlive one drive)
+WORLD_PATH = "nav.path"
+WORLD_PEOPLE = "nav.people"
+WORLD_LOCAL_PLANNER = "nav.local_planner"
+
+#: bearing [rad] in ``base_link`` of what a contact sensor felt, by the fault's side
+CONTACT_BEARINGS = {"left": math.pi / 4, "centre": 0.0, "right": -math.pi / 4}
+#: [s] how long a pressed bumper may keep the base from backing off before the drive fails
+CONTACT_CLEAR_TIME = 2.0
+#: [m/s] backing-off speed (recoveries and contacts)
+BACK_OFF_SPEED = 0.1
+
+
+@dataclass(frozen=True)
+class LocalDriveConfig:
+    """What one drive needs from the profile: the ``planner``'s configuration (its base
+    limits, margin, DWA goal tolerance); ``margin`` [m] the global plan inflates by on top
+    of the footprint radius; ``replan_interval`` [s] between two re-plans of a blocked
+    path; ``recoveries`` (stuck recoveries, and contacts, before failing);
+    ``back_off`` [m] how far a recovery backs off; ``heading_tolerance`` [rad] at the
+    goal; ``goal_search`` [m] how far a goal an obstacle covers may move (0: fail);
+    ``tracker`` the docking tracker's limits and tolerances, ``dock_distance`` [m] how
+    close to the goal docking starts."""
+
+    planner: LocalPlannerConfig
+    margin: float
+    tracker: TrackerConfig
+    replan_interval: float = 1.0
+    recoveries: int = 3
+    back_off: float = 0.2
+    heading_tolerance: float = 0.04
+    goal_search: float = 0.3
+    dock_distance: float = 0.5
+
+
+def local_planner(ctx: SkillContext, config: LocalPlannerConfig) -> LocalPlanner:
+    """The run's local planner for ``config`` over the robot's map, kept in the world
+    model (``nav.local_planner``) so the costmap's marks and the tracks carry over from
+    one drive to the next; a new one when the map or the configuration changes."""
+    occ = ctx.robot.occupancy
+    assert occ is not None
+    cached = ctx.world.get(WORLD_LOCAL_PLANNER)
+    if cached is not None and cached[0] is occ and cached[1].config == config:
+        planner: LocalPlanner = cached[1]
+        return planner
+    planner = LocalPlanner(occ, config)
+    ctx.world[WORLD_LOCAL_PLANNER] = (occ, planner)
+    return planner
+
+
+def contact_points(pose: Pose2D, faults: frozenset[str], radius: float, *, spread: float = 0.5,
+                   n: int = 7, beyond: float = 0.03) -> np.ndarray:
+    """Map points (k, 2) [m] where the contact sensors named in ``faults`` (``bumper_left``,
+    ``cliff_centre``, ...) felt something: for each, an arc of ``n`` points over
+    ``+-spread`` [rad] around its bearing (:data:`CONTACT_BEARINGS`), ``beyond`` [m]
+    outside the footprint ``radius`` of the base at ``pose``."""
+    pts = []
+    for f in sorted(faults):
+        side = f.rsplit("_", 1)[-1]
+        bearing = CONTACT_BEARINGS.get(side, 0.0)
+        for a in np.linspace(bearing - spread, bearing + spread, n):
+            th = pose.theta + float(a)
+            pts.append((pose.x + (radius + beyond) * math.cos(th), pose.y + (radius + beyond) * math.sin(th)))
+    return np.array(pts, dtype=float).reshape(-1, 2)
+
+
+def cell_to_world_array(grid: OccupancyGrid, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Map coordinates ``(x, y)`` [m] of the centres of cells ``(rows, cols)`` (arrays):
+    the vectorised :func:`~mmexec.skills.navigation.grid.cell_to_world`."""
+    o = grid.origin
+    gx, gy = (cols + 0.5) * grid.resolution, (rows + 0.5) * grid.resolution
+    c, s = math.cos(o.theta), math.sin(o.theta)
+    return o.x + c * gx - s * gy, o.y + s * gx + c * gy
+
+
+def is_contact(fault: str) -> bool:
+    """A bumper or cliff sensor (the faults the contact recovery handles)."""
+    return fault.startswith(("bumper_", "cliff_"))
+
+
+def _rounded(values: Any, digits: int = 3) -> Any:
+    """Floats (or nested lists of them) rounded for the event log."""
+    if isinstance(values, (list, tuple)):
+        return [_rounded(v, digits) for v in values]
+    return round(float(values), digits)
+
+
+class LocalDrive:
+    """One drive to ``goal`` (see the module docstring): construct, then ``yield from
+    drive.run()``, which returns the pose reached. ``path`` (map points) is followed if
+    given, otherwise planned; ``static`` is the static map inflated for the base;
+    ``status(ctx, state, **fields)`` writes the seed's base states (``to_goal``,
+    ``goal_ok``, ``goal_fail``, ``idle``)."""
+
+    #: [m] a re-planned path longer than the best path length left by more than this is a
+    #: way round, and progress is counted afresh along it
+    DETOUR = 0.3
+
+    def __init__(self, ctx: SkillContext, base: Base, lidar: Lidar, goal: Pose2D, label: str, *,
+                 config: LocalDriveConfig, static: CostMap, timeout: float,
+                 path: list[tuple[float, float]] | None, status: Callable[..., None]) -> None:
+        self.ctx, self.base, self.lidar = ctx, base, lidar
+        self.goal, self.label, self.config = goal, label, config
+        self.static, self.timeout, self.status = static, timeout, status
+        self.planner = local_planner(ctx, config.planner)
+        self._given_path = path
+        self._last_stamp = -math.inf
+        self._last_replan = -math.inf
+        self._last_tick = ctx.clock.now()
+        self.recoveries = 0
+        self.contacts = 0
+        self.replans = 0
+        self._no_way = False  # the last re-plan found no way to the goal
+        self._path: list[tuple[float, float]] | None = None
+        self._best, self._t_best = math.inf, ctx.clock.now()  # progress: least path length left, and when
+        self._deadline = ctx.clock.now() + timeout
+        self._people_shown = False
+
+    # ------------------------------------------------------------------ planning
+    def _inflated(self, now: float) -> CostMap:
+        """The map to plan on now: the static one, or with what the lidar and the
+        contact sensors found written in (when they found anything), except under the
+        base's own footprint: the base stands there, so what was marked there (the trail
+        of someone who walked past, a circle drawn round a person not yet told from
+        furniture) is not there, and A* must be able to start."""
+        cm = self.planner.costmap
+        tracks = self.planner.circles_at(now)
+        if not cm.marks.any() and not np.any(~tracks.person):
+            return self.static
+        lim = self.config.planner.limits
+        grid = self.planner.replan_grid(now)
+        pose = self.base.state().pose
+        data = np.array(grid.data, copy=True)
+        rows, cols = np.indices(data.shape)
+        xy = np.stack(cell_to_world_array(grid, rows, cols), axis=-1)
+        under = np.hypot(xy[..., 0] - pose.x, xy[..., 1] - pose.y) <= lim.radius
+        static = np.asarray(self.static.grid.data)
+        data[under & (static < 50) & (static >= 0)] = 0
+        cm = inflate(replace(grid, data=data), lim.radius, self.config.margin)
+        # and A* must be able to leave: the inflation round what is near the base is
+        # passable from the base outwards (only obstacle cells themselves are not)
+        near = np.hypot(xy[..., 0] - pose.x, xy[..., 1] - pose.y) <= lim.radius + self.config.margin + grid.resolution
+        return replace(cm, blocked=cm.blocked & ~(near & (cm.clearance > 0.0)))
+
+    def _plan(self, now: float, why: str) -> list[tuple[float, float]] | None:
+        """A* from the base's pose to the goal on :meth:`_inflated`, simplified, from the
+        base to the goal exactly; published and logged. None when there is no way."""
+        start = self.base.state().pose
+        cm = self._inflated(now)
+        gx, gy = self.goal.x, self.goal.y
+        if not cm.is_free(gx, gy) and self.config.goal_search > 0:
+            free = cm.nearest_free(gx, gy, self.config.goal_search)
+            if free is not None:
+                gx, gy = free
+        grid_path = plan_path(cm, (start.x, start.y), (gx, gy)) if cm.is_free(gx, gy) else None
+        if grid_path is None:
+            self.ctx.emit("nav_plan", why=why, found=False, label=self.label, node=self.ctx.node_path)
+            return None
+        grid_path = simplify_path(cm, grid_path)
+        return [(start.x, start.y), *grid_path[1:-1], (gx, gy)] if len(grid_path) > 1 else [(gx, gy)]
+
+    def _follow_path(self, path: list[tuple[float, float]], why: str, now: float) -> None:
+        """Follow ``path`` from now: published (``nav.path``) and logged (``nav_plan``)
+        unless it is the path already followed (a re-plan that found the same way)."""
+        same = (self._path is not None and len(path) == len(self._path)
+                and all(math.hypot(a[0] - b[0], a[1] - b[1]) < 0.05 for a, b in zip(path[1:], self._path[1:])))
+        self.planner.set_path(path, now)
+        self._path = path
+        length = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in itertools.pairwise(path))
+        if length > self._best + self.DETOUR:  # a longer way round: progress counts from here
+            self._best, self._t_best = length, now
+        if same:
+            return
+        self.ctx.world[WORLD_PATH] = [[float(x), float(y)] for x, y in path]
+        self.ctx.emit("nav_plan", why=why, found=True, label=self.label, points=_rounded(path),
+                      length=round(length, 3), node=self.ctx.node_path)
+
+    def _replan(self, now: float, why: str) -> bool:
+        """Plan again and follow the new path; False (the old path kept) when there is no way."""
+        self._last_replan = now
+        path = self._plan(now, why)
+        self._no_way = path is None
+        if path is None:
+            return False
+        self.replans += 1
+        self._follow_path(path, why, now)
+        return True
+
+    def _stuck(self, remaining: float, now: float) -> bool:
+        """No progress: the path length left (``remaining`` [m]) has not fallen by the
+        DWA's ``stuck_progress`` below its best for ``stuck_time`` seconds. Kept here, not
+        in the DWA, because a re-plan restarts the DWA's own count (and one that finds the
+        same way again every second would hide a standstill)."""
+        dwa = self.config.planner.dwa
+        if remaining < self._best - dwa.stuck_progress:
+            self._best, self._t_best = remaining, now
+        return now - self._t_best > dwa.stuck_time
+
+    def _giving_way(self, circles: Circles, pose: Pose2D) -> bool:
+        """Someone is walking (tracked speed above the tracker's ``moving_speed``) within
+        the social layer's ``slow_gap`` of the base: whatever the base does now (slowing,
+        stopping while the filter holds it), it is giving way, not stuck."""
+        people = circles.people
+        if not len(people):
+            return False
+        cfg = self.config.planner
+        gap = np.hypot(people.centres[:, 0] - pose.x, people.centres[:, 1] - pose.y) - people.radii - cfg.limits.radius
+        moving = np.hypot(people.velocities[:, 0], people.velocities[:, 1]) > cfg.tracking.moving_speed
+        return bool(np.any(moving & (gap < cfg.social.slow_gap)))
+
+    def _restart_progress(self, now: float) -> None:
+        self._best, self._t_best = math.inf, now
+
+    # ------------------------------------------------------------------ ticking
+    def _scan(self) -> LaserScan | None:
+        """The lidar's newest scan when it is new (None otherwise or on a dropout)."""
+        scan = self.lidar.scan()
+        if scan is None or scan.stamp <= self._last_stamp:
+            return None
+        self._last_stamp = scan.stamp
+        return scan
+
+    def _observe(self) -> None:
+        """Feed a new scan to the costmap and the tracks (while turning or backing off)."""
+        scan = self._scan()
+        if scan is not None:
+            self.planner.observe(scan, self.base.state().pose)
+
+    def _log_tick(self, cmd: LocalCommand, pose: Pose2D) -> None:
+        people = cmd.circles.people
+        rows = [{"id": int(i), "x": float(c[0]), "y": float(c[1]), "vx": float(v[0]), "vy": float(v[1])}
+                for i, c, v in zip(people.ids, people.centres, people.velocities)]
+        if rows or self._people_shown:
+            self.ctx.world[WORLD_PEOPLE] = rows
+            self._people_shown = bool(rows)
+        f = cmd.cbf
+        self.ctx.emit("nav_tick", pose=_rounded([pose.x, pose.y, pose.theta]), cmd=_rounded([cmd.v, cmd.w]),
+                      ref=_rounded([cmd.dwa.v, cmd.dwa.w]),
+                      h=round(float(f.h.min()), 4) if f is not None and f.h.size else None,
+                      active=int(f.active.sum()) if f is not None else 0,
+                      infeasible=f is not None and f.status is QpStatus.INFEASIBLE,
+                      status=cmd.status.value, blocked=cmd.path_blocked, scale=round(cmd.speed_scale, 3),
+                      circles=len(cmd.circles),
+                      people=[_rounded([r["x"], r["y"], r["vx"], r["vy"]], 2) for r in rows])
+
+    def _fail(self, kind: FailureKind, reason: str, why: str) -> SkillFailure:
+        self.status(self.ctx, "goal_fail", reason=why)
+        return SkillFailure(kind, reason)
+
+    def _check_faults(self) -> frozenset[str]:
+        """The base's contact faults now (empty: none); any other fault fails the drive."""
+        faults = self.base.state().faults
+        other = frozenset(f for f in faults if not is_contact(f))
+        if other:
+            raise self._fail(FailureKind.EXECUTION, f"base fault on the way to {self.label}: {', '.join(sorted(faults))}",
+                             f"base fault: {', '.join(sorted(faults))}")
+        return faults
+
+    def run(self) -> Generator[None, None, Pose2D]:
+        """The drive (see the class docstring); returns the pose reached."""
+        ctx, base = self.ctx, self.base
+        now = ctx.clock.now()
+        self.planner.reset_command()
+        if self._given_path is not None:
+            start, given = base.state().pose, self._given_path
+            # a grid path runs between cell centres: from the base, to the goal exactly
+            path = [(start.x, start.y), *given[1:-1], (self.goal.x, self.goal.y)] if len(given) > 1 \
+                else [(self.goal.x, self.goal.y)]
+            why = "given"
+        else:
+            planned = self._plan(now, "start")
+            if planned is None:
+                self.status(ctx, "goal_fail", goal=[self.goal.x, self.goal.y, self.goal.theta], reason="no path")
+                self.status(ctx, "idle")
+                raise SkillFailure(FailureKind.PLANNING, f"no path to {self.label} ({self.goal.x:.2f}, {self.goal.y:.2f})")
+            path, why = planned, "start"
+        self._follow_path(path, why, now)
+        self.status(ctx, "to_goal", goal=_rounded([self.goal.x, self.goal.y, self.goal.theta]), label=self.label)
+        try:
+            yield from self._follow()
+            reached = base.state().pose
+            self.status(ctx, "goal_ok", pose=_rounded([reached.x, reached.y, reached.theta]))
+            return reached
+        except SkillCancelled:
+            yield from brake(ctx, base)
+            raise
+        except SkillFailure:
+            yield from brake(ctx, base)
+            raise
+        finally:
+            ctx.world[WORLD_PATH] = []
+            if self._people_shown:
+                ctx.world[WORLD_PEOPLE] = []
+            self.status(ctx, "idle")
+
+    def _timed_out(self, now: float) -> bool:
+        return now > self._deadline
+
+    def _follow(self) -> Generator[None, None, None]:
+        """Tick the local planner until the goal is reached (then turn to its heading)."""
+        ctx, base, cfg = self.ctx, self.base, self.config
+        while True:
+            faults = self._check_faults()
+            if faults:
+                yield from self._contact(faults)
+                continue
+            now = ctx.clock.now()
+            if self._timed_out(now):
+                raise self._fail(FailureKind.EXECUTION, f"not at {self.label} after {self.timeout:g} s", "timeout")
+            dt = now - self._last_tick
+            if dt <= 0:
+                yield  # the clock stands: nothing to do this tick
+                continue
+            self._last_tick = now
+            st = base.state()
+            if self._can_dock(st.pose):
+                if (yield from self._dock()):
+                    return
+                continue
+            cmd = self.planner.step(st.pose, st.v, st.w, now, dt, self._scan())
+            self._log_tick(cmd, st.pose)
+            if cmd.status is DwaStatus.GOAL_REACHED:
+                yield from brake(ctx, base)
+                if (yield from self._turn_to(self.goal.theta)):
+                    return
+                continue  # a contact while turning: it backed off and re-planned
+            if cmd.path_blocked and now - self._last_replan >= cfg.replan_interval:
+                self._replan(now, "blocked")
+            if self._giving_way(cmd.circles, st.pose):
+                self._t_best += dt  # waiting for someone walking by is no standstill
+            elif self._stuck(cmd.dwa.remaining, now):
+                yield from self._recover("stuck: no progress along the path")
+                continue
+            base.set_velocity(cmd.v, cmd.w)
+            yield
+
+    # ------------------------------------------------------------------ docking
+    def _way_clear(self, pose: Pose2D) -> bool:
+        """The straight way from ``pose`` to the goal keeps the footprint radius from every
+        costmap obstacle and stays out of every non-person circle's safety radius (people
+        are the filter's business: they move on)."""
+        gx, gy = self.goal.x, self.goal.y
+        d = math.hypot(gx - pose.x, gy - pose.y)
+        n = max(2, math.ceil(d / (0.5 * self.planner.costmap.resolution)) + 1)
+        f = np.linspace(0.0, 1.0, n)[:, None]
+        pts = np.array([pose.x, pose.y]) + f * np.array([gx - pose.x, gy - pose.y])
+        if np.any(self.planner.costmap.clearance_at(pts[1:]) < self.config.planner.limits.radius):
+            return False
+        c = self.planner.circles_at(self.ctx.clock.now())
+        c = c.select(~c.person)
+        if len(c):
+            gap = np.hypot(pts[:, None, 0] - c.centres[:, 0], pts[:, None, 1] - c.centres[:, 1]) - c.safety_radii
+            return not np.any(gap < 0.0)
+        return True
+
+    def _can_dock(self, pose: Pose2D) -> bool:
+        return (math.hypot(self.goal.x - pose.x, self.goal.y - pose.y) <= self.config.dock_distance
+                and self._way_clear(pose))
+
+    def _dock(self) -> Generator[None, None, bool]:
+        """Pure pursuit to the goal along the straight way, heading aligned at the end,
+        each command through the CLF-CBF filter against the tracked circles. True when
+        docked; False when the way closed (re-planned) or a contact recovery ran."""
+        ctx, base = self.ctx, self.base
+        start = base.state().pose
+        tracker = PathTracker([(start.x, start.y), (self.goal.x, self.goal.y)], self.config.tracker,
+                              goal_heading=self.goal.theta)
+        self._follow_path([(start.x, start.y), (self.goal.x, self.goal.y)], "dock", ctx.clock.now())
+        last = ctx.clock.now()
+        held_since: float | None = None  # since when the filter has held the tracker back
+        u = (base.state().v, base.state().w)
+        while True:
+            faults = self._check_faults()
+            if faults:
+                yield from self._contact(faults)
+                return False
+            now = ctx.clock.now()
+            if self._timed_out(now):
+                raise self._fail(FailureKind.EXECUTION, f"not at {self.label} after {self.timeout:g} s", "timeout")
+            dt = now - last
+            if dt <= 0:
+                yield
+                continue
+            last = now
+            st = base.state()
+            self._observe()
+            if not self._way_clear(st.pose):
+                yield from brake(ctx, base)
+                self._replan(now, "dock blocked")
+                self.planner.reset_command()
+                return False
+            v, w, done = tracker.step(st.pose, st.v, st.w, dt)
+            if done:
+                yield from brake(ctx, base)
+                return True
+            circles = self.planner.circles_at(now)
+            if len(circles):
+                f = self.planner.cbf.filter(st.pose, (v, w), None, circles, u, dt, max(v, 0.0))
+                held = (abs(f.v - v) > 0.01 or abs(f.w - w) > 0.05) and not self._giving_way(circles, st.pose)
+                held_since = (held_since if held_since is not None else now) if held else None
+                v, w = f.v, f.w
+                if held_since is not None and now - held_since > self.config.planner.dwa.stuck_time:
+                    yield from self._recover("docking held back by the safety filter")
+                    return False
+            u = (v, w)
+            base.set_velocity(v, w)
+            yield
+
+    # ------------------------------------------------------------------ motions
+    def _turn_to(self, target: float, *, rate: float | None = None) -> Generator[None, None, bool]:
+        """Turn in place to heading ``target`` [rad] within the heading tolerance
+        (observing scans on the way); ``rate`` [rad/s] caps the turn rate. False when a
+        contact cut the turn short (the contact recovery ran)."""
+        return (yield from self._turn(lambda th: wrap_angle(target - th), rate))
+
+    def _turn(self, error: Callable[[float], float], rate: float | None) -> Generator[None, None, bool]:
+        """Turn in place until ``error(theta)`` [rad] is within the heading tolerance: the
+        fastest turn rate that still stops there, within the limits (and ``rate``). False
+        when a contact cut it short (the contact recovery ran)."""
+        ctx, base = self.ctx, self.base
+        lim = self.config.planner.limits
+        w_max = lim.max_w if rate is None else min(lim.max_w, rate)
+        last = ctx.clock.now()
+        while True:
+            faults = self._check_faults()
+            if faults:
+                yield from self._contact(faults)
+                return False
+            st = base.state()
+            err = error(st.pose.theta)
+            now = ctx.clock.now()
+            if abs(err) <= self.config.heading_tolerance:
+                yield from brake(ctx, base)
+                return True
+            if self._timed_out(now):
+                raise self._fail(FailureKind.EXECUTION, f"not at {self.label} after {self.timeout:g} s", "timeout")
+            dt = max(now - last, 1e-3)
+            last = now
+            w_stop = math.sqrt(2.0 * lim.accel_w * 0.8 * abs(err))
+            w_des = math.copysign(max(min(w_max, w_stop), 0.1), err)
+            dw = lim.accel_w * dt
+            base.set_velocity(0.0, max(st.w - dw, min(st.w + dw, w_des)))
+            self._observe()
+            yield
+
+    def _room_behind(self, pose: Pose2D, distance: float) -> float:
+        """How far [m] (up to ``distance``) the base can back straight off from ``pose``
+        with the costmap's clearance and every circle's safety radius kept."""
+        lim = self.config.planner.limits
+        circles = self.planner.circles_at(self.ctx.clock.now())
+        step = 0.5 * self.planner.costmap.resolution
+        free = 0.0
+        for d in np.arange(step, distance + 1e-9, step):
+            p = np.array([[pose.x - d * math.cos(pose.theta), pose.y - d * math.sin(pose.theta)]])
+            if float(self.planner.costmap.clearance_at(p)[0]) < lim.radius:
+                break
+            if len(circles):
+                gap = np.hypot(circles.centres[:, 0] - p[0, 0], circles.centres[:, 1] - p[0, 1]) - circles.safety_radii
+                now_gap = np.hypot(circles.centres[:, 0] - pose.x, circles.centres[:, 1] - pose.y) - circles.safety_radii
+                if np.any((gap < 0.0) & (gap < now_gap)):
+                    break
+            free = float(d)
+        return free
+
+    def _back_off(self, distance: float, *, pressed: bool = False) -> Generator[None, None, float]:
+        """Drive straight back ``distance`` [m] at :data:`BACK_OFF_SPEED` (observing
+        scans); ``pressed``: a contact sensor is still reporting, which is expected while
+        the base backs away from what it touched. Returns the distance covered [m]."""
+        ctx, base = self.ctx, self.base
+        start = base.state().pose
+        t0 = ctx.clock.now()
+        while True:
+            st = base.state()
+            faults = st.faults
+            other = frozenset(f for f in faults if not is_contact(f))
+            if other or (faults and not pressed):
+                self._check_faults()  # raises for another fault
+                yield from self._contact(faults)
+                return start.distance_to(base.state().pose)
+            done = start.distance_to(st.pose)
+            now = ctx.clock.now()
+            if faults and now - t0 > CONTACT_CLEAR_TIME and done < 0.01:
+                raise self._fail(FailureKind.EXECUTION,
+                                 f"base fault on the way to {self.label}: {', '.join(sorted(faults))} still reported "
+                                 f"{CONTACT_CLEAR_TIME:g} s after the contact: the base cannot back off",
+                                 f"base fault: {', '.join(sorted(faults))}")
+            if done >= distance - 0.005 or self._timed_out(now):
+                yield from brake(ctx, base)
+                return done
+            left = distance - done
+            v = min(BACK_OFF_SPEED, math.sqrt(2.0 * self.config.planner.limits.accel_v * 0.5 * left))
+            base.set_velocity(-max(v, 0.02), 0.0)
+            self._observe()
+            yield
+
+    # ------------------------------------------------------------------ recoveries
+    def _recover(self, why: str) -> Generator[None, None, None]:
+        """Brake, turn once round, back off, re-plan; fail when the recoveries are spent."""
+        ctx = self.ctx
+        self.recoveries += 1
+        if self.recoveries > self.config.recoveries:
+            if self._no_way:
+                raise self._fail(FailureKind.PLANNING,
+                                 f"no path to {self.label}: blocked by obstacles the map does not show "
+                                 f"({self.config.recoveries} recoveries, {self.replans} re-plans)", "blocked")
+            raise self._fail(FailureKind.EXECUTION,
+                             f"stuck on the way to {self.label} after {self.config.recoveries} recoveries "
+                             f"(rotate, back off, re-plan): {why}", "stuck")
+        pose = self.base.state().pose
+        ctx.emit("nav_recovery", attempt=self.recoveries, of=self.config.recoveries, why=why,
+                 pose=_rounded([pose.x, pose.y, pose.theta]), node=ctx.node_path)
+        log.info("%s: recovery %d of %d (%s)", self.label, self.recoveries, self.config.recoveries, why)
+        yield from brake(ctx, self.base)
+        turned = [0.0]
+        last = [pose.theta]
+
+        def once_round(theta: float) -> float:
+            turned[0] += wrap_angle(theta - last[0])
+            last[0] = theta
+            return 2.0 * math.pi - turned[0]
+
+        yield from self._turn(once_round, None)
+        room = self._room_behind(self.base.state().pose, self.config.back_off)
+        if room > 0.02:
+            yield from self._back_off(room)
+        self._restart_progress(ctx.clock.now())
+        self._replan(ctx.clock.now(), "recovery")
+        self.planner.reset_command()
+
+    def _contact(self, faults: frozenset[str]) -> Generator[None, None, None]:
+        """Stop, pin what was felt in the costmap, back off, re-plan (module docstring)."""
+        ctx, base = self.ctx, self.base
+        self.contacts += 1
+        names = ", ".join(sorted(faults))
+        if self.contacts > self.config.recoveries:
+            raise self._fail(FailureKind.EXECUTION,
+                             f"base fault on the way to {self.label}: {names} ({self.contacts} contacts)",
+                             f"base fault: {names}")
+        base.stop()
+        if not (base.state().faults & BLIND_FAULTS):
+            yield from brake(ctx, base)
+        pose = base.state().pose
+        pts = contact_points(pose, faults, self.config.planner.limits.radius)
+        self.planner.costmap.pin(pts)
+        ctx.emit("nav_contact", faults=sorted(faults), attempt=self.contacts, of=self.config.recoveries,
+                 pose=_rounded([pose.x, pose.y, pose.theta]), marked=_rounded(pts.tolist()), node=ctx.node_path)
+        log.warning("%s: %s at (%.2f, %.2f): backing off and re-planning", self.label, names, pose.x, pose.y)
+        yield from self._back_off(self.config.back_off, pressed=True)
+        self._restart_progress(ctx.clock.now())
+        self._replan(ctx.clock.now(), "contact")
+        self.planner.reset_command()
