@@ -45,6 +45,8 @@ def add_campaign_parser(sub: Any) -> None:
     c.add_argument("--param", action="append", default=[], metavar="K=V", help="override a mission parameter")
     c.add_argument("--request-timeout", type=float, metavar="S", help="clock seconds per request (mmexec run)")
     c.add_argument("--trial-timeout", type=float, metavar="S", help="wall seconds per trial before it is killed")
+    c.add_argument("--mcap", action="store_true",
+                   help="also record each trial as DIR/trials/NNNN.mcap (Foxglove; docs/foxglove.md)")
     c.add_argument("--compare", action="append", type=Path, default=[], metavar="DIR",
                    help="another campaign directory to compare against in the report (repeatable)")
 
@@ -100,7 +102,7 @@ def cmd_campaign(args: argparse.Namespace, *, out: TextIO | None = None,
         randomize=not args.no_randomize,
         requests=RequestPlan(fixed=fixed, draws=draws, per_trial=args.requests_per_trial),
         params=params, request_timeout=args.request_timeout, trial_timeout=args.trial_timeout,
-        compare=list(args.compare), progress=progress,
+        compare=list(args.compare), progress=progress, mcap=args.mcap,
     )
     if opts.ray is not None:
         import_ray(local=not opts.ray)

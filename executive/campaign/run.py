@@ -54,6 +54,8 @@ class CampaignOptions:
     trial_timeout: float | None = None
     compare: list[Path] = field(default_factory=list)
     progress: bool | None = None
+    #: record each trial as DIR/trials/NNNN.mcap too (``mmexec run --mcap``)
+    mcap: bool = False
 
 
 #: Settings that must match for a DIR to be resumed (the identity of its trials).
@@ -215,7 +217,10 @@ class Campaign:
             argv.append("--no-recovery")
         log_path = self.trials_dir / f"{index:04d}.jsonl"
         # --overwrite: a resumed campaign runs an interrupted trial again into its own log
-        argv += ["--log", str(log_path), "--overwrite"]
+        argv += ["--log", str(log_path)]
+        if o.mcap:
+            argv += ["--mcap", str(self.trials_dir / f"{index:04d}.mcap")]
+        argv.append("--overwrite")
         return TrialSpec(index, seed, tuple(argv), str(log_path), str(self.trials_dir / f"{index:04d}.out"),
                          cwd, o.trial_timeout)
 

@@ -31,12 +31,13 @@ class TrialSpec:
 
     @property
     def command(self) -> str:
-        """The shell command reproducing this trial alone (without ``--log`` and its
-        ``--overwrite``)."""
+        """The shell command reproducing this trial alone (without the campaign's own
+        output files, ``--log`` and ``--mcap``, and their ``--overwrite``)."""
         argv = list(self.argv)
-        if "--log" in argv:
-            i = argv.index("--log")
-            del argv[i:i + 2]
+        for option in ("--log", "--mcap"):
+            if option in argv:
+                i = argv.index(option)
+                del argv[i:i + 2]
         if "--overwrite" in argv:
             argv.remove("--overwrite")
         return shlex.join(["mmexec", *argv])

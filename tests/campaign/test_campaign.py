@@ -361,3 +361,23 @@ def test_progress_line_on_a_terminal_and_plain_lines_otherwise() -> None:
     line = plain.getvalue()
     assert line.startswith("trial 0000 seed 10: error, 1.5 s clock, 0.5 s wall: boom  [1/2] 0 ok (0.0%), 1 errors")
     assert "\r" not in line and line.endswith("\n")
+
+
+def test_mcap_records_each_trial_and_stays_out_of_the_reproduce_command(tmp_path: Path,
+                                                                        skills_on_path: None) -> None:
+    # --mcap: every trial also writes DIR/trials/NNNN.mcap with the channels of `run --mcap`
+    # (docs/foxglove.md); the recorded command to reproduce a trial names none of the
+    # campaign's own output files
+    from mcap.reader import make_reader
+
+    out = tmp_path / "c"
+    opts = coin_options(out, trials=2, requests=RequestPlan(draws={"item": ("2", "4")}), mcap=True)
+    with open(os.devnull, "w") as null:
+        _, results = run_campaign(opts, out=null)
+    assert [r.outcome for r in results] == ["success", "success"]
+    for r in results:
+        path = out / "trials" / f"{r.index:04d}.mcap"
+        with path.open("rb") as f:
+            topics = {channel.topic for _schema, channel, _message in make_reader(f).iter_messages()}
+        assert "/mmexec/events" in topics and "/mmexec/tree" in topics
+        assert "--mcap" not in r.command and "--overwrite" not in r.command and "--log" not in r.command
