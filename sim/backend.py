@@ -559,6 +559,10 @@ FAULT_PATCHES: dict[str, dict[str, Any]] = {
     "arm_fail_twice": {"faults": {"arm_fail_attempts": [1, 2]}},
     "arm_fail_always": {"faults": {"arm_fail": "always"}},
     "sensor_dropout": {"faults": {"camera_dropout": {"p": 0.2}, "lidar_dropout": {"p": 0.2}}},
+    # the world faults: their defaults (mmexec.sim.faults), and each trial's ground truth
+    # (mmexec.sim.truth) written to DIR/truth/SEED.jsonl beside DIR/config.yaml
+    "crowd": {"faults": {"crowd": {}}, "truth_log": "truth/{seed}.jsonl"},
+    "clutter": {"faults": {"clutter": {}}, "truth_log": "truth/{seed}.jsonl"},
 }
 
 #: The ``sim`` backend, as the executive's registry sees it.

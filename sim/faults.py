@@ -134,11 +134,11 @@ class Crowd:
     waypoints: int = 3
 
     def validate(self) -> list[str]:
-        out = [] if 1 <= self.count <= 50 else [f"crowd.count must be 1..50, got {self.count}"]
-        out += [] if 2 <= self.waypoints <= 20 else [f"crowd.waypoints must be 2..20, got {self.waypoints}"]
-        return (out + _range_problems("crowd.speed", self.speed, 0.05, 2.0)
-                + _range_problems("crowd.pause", self.pause, 0.0, 600.0)
-                + _range_problems("crowd.radius", self.radius, 0.1, 0.4))
+        out = [] if 1 <= self.count <= 50 else [f"count must be 1..50, got {self.count}"]
+        out += [] if 2 <= self.waypoints <= 20 else [f"waypoints must be 2..20, got {self.waypoints}"]
+        return (out + _range_problems("speed", self.speed, 0.05, 2.0)
+                + _range_problems("pause", self.pause, 0.0, 600.0)
+                + _range_problems("radius", self.radius, 0.1, 0.4))
 
 
 @dataclass(frozen=True)
@@ -159,11 +159,11 @@ class Clutter:
     passage: float | None = None
 
     def validate(self) -> list[str]:
-        out = [] if 1 <= self.count <= 50 else [f"clutter.count must be 1..50, got {self.count}"]
+        out = [] if 1 <= self.count <= 50 else [f"count must be 1..50, got {self.count}"]
         if self.near < 0 or self.keep_clear < 0 or (self.passage is not None and self.passage <= 0):
-            out.append("clutter.near and clutter.keep_clear must be >= 0 m, clutter.passage > 0 m")
-        return out + _range_problems("clutter.size", self.size, 0.05, 2.0) + _range_problems(
-            "clutter.height", self.height, 0.02, 3.0)
+            out.append("near and keep_clear must be >= 0 m, passage > 0 m")
+        return out + _range_problems("size", self.size, 0.05, 2.0) + _range_problems(
+            "height", self.height, 0.02, 3.0)
 
 
 @dataclass(frozen=True)

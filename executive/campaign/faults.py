@@ -2,7 +2,8 @@
 for a run config's backend section. ``DIR/config.yaml`` is the user's config with one
 profile applied (:func:`apply_fault_profile`); the built-in profiles are
 :data:`BUILTIN_PROFILES`, anything else is a profile file (:func:`load_fault_profile`).
-docs/campaigns.md has the table of built-in profiles.
+Profiles combine with ``+`` (``--faults crowd+arm_fail_first``: every fault off once, then
+each profile's own patches in turn). docs/campaigns.md has the table of built-in profiles.
 
 Each backend declares its own patches (:class:`~mmexec.drivers.backendspec.BackendSpec`):
 ``faults_off`` switches every injected fault of its section off, ``fault_patches[NAME]``
@@ -22,8 +23,8 @@ from mmexec.executive.backends import backend_spec, names, specs
 from mmexec.executive.campaign.jsondata import plain
 from mmexec.executive.runner import ArgMark
 
-__all__ = ["AS_WRITTEN", "BUILTIN_PROFILES", "NOMINAL", "FaultProfile", "apply_fault_profile", "builtin_profile",
-           "load_fault_profile", "merge_patch"]
+__all__ = ["AS_WRITTEN", "BUILTIN_PROFILES", "COMBINE", "NOMINAL", "FaultProfile", "apply_fault_profile",
+           "builtin_profile", "combine_profiles", "load_fault_profile", "merge_patch"]
 
 
 def merge_patch(target: Any, patch: Any) -> Any:
@@ -75,7 +76,14 @@ BUILTIN_PROFILES: dict[str, str] = {
     "sensor_dropout": "camera frames and lidar scans are missing with probability 0.2 (sim only)",
     "nav_blocked": "the base cannot move (mock only; for the sim name the items in a profile file: "
                    "sim: {faults: {nav_blocked: [box_3]}})",
+    "crowd": "people walk loops through the room, giving way to the robot (sim only: sim.faults.crowd, 2 people "
+             "at 0.3-1.2 m/s; each trial's ground truth in DIR/truth/SEED.jsonl)",
+    "clutter": "boxes the map does not show stand near the robot's routes, a way through always left (sim only: "
+               "sim.faults.clutter, 3 boxes; ground truth in DIR/truth/SEED.jsonl)",
 }
+
+#: joins profiles in ``--faults`` (``crowd+arm_fail_first``)
+COMBINE = "+"
 
 
 def builtin_profile(name: str) -> FaultProfile:
@@ -92,11 +100,40 @@ def builtin_profile(name: str) -> FaultProfile:
     return FaultProfile(name, BUILTIN_PROFILES[name], patches)
 
 
+def combine_profiles(profiles: list[FaultProfile]) -> FaultProfile:
+    """One profile doing what each of ``profiles`` does, in order: for every backend all of
+    them can run, the first one's patches, then each next one's without its leading
+    ``faults_off`` (so the faults the earlier ones switched on stay on)."""
+    first = profiles[0]
+    patches: dict[str, tuple[Mapping[str, Any], ...]] = {}
+    for backend in first.patches:
+        if not all(backend in pr.patches for pr in profiles):
+            continue
+        off = backend_spec(backend, ArgMark("--faults", 0, 0)).faults_off
+        out = tuple(first.patches[backend])
+        for pr in profiles[1:]:
+            more = tuple(pr.patches[backend])
+            out += more[1:] if more and off is not None and more[0] == off else more
+        patches[backend] = out
+    if not patches:
+        raise InputError.at(ArgMark("--faults", 0, 0), f"fault profiles {' and '.join(repr(pr.name) for pr in profiles)} "
+                            f"have no backend in common")
+    sources = {pr.source for pr in profiles}
+    return FaultProfile(COMBINE.join(pr.name for pr in profiles), "; ".join(pr.description for pr in profiles),
+                        patches, source=sources.pop() if len(sources) == 1 else ", ".join(pr.source for pr in profiles))
+
+
 def load_fault_profile(name_or_path: str) -> FaultProfile:
     """A built-in profile by name, or a profile file: a YAML mapping with optional
     ``description``, ``base: nominal|config`` (start from every fault off, the default,
     or from the config as written) and one merge patch per backend name (``sim:``,
-    ``mock:``). InputError naming ``--faults`` or ``FILE:LINE:COL`` otherwise."""
+    ``mock:``); several joined by ``+`` (:func:`combine_profiles`). InputError naming
+    ``--faults`` or ``FILE:LINE:COL`` otherwise."""
+    if COMBINE in name_or_path and not Path(name_or_path).exists():
+        parts = name_or_path.split(COMBINE)
+        if any(not part for part in parts):
+            raise InputError.at(ArgMark("--faults", 0, 0), f"{name_or_path!r}: an empty profile name between '+'")
+        return combine_profiles([load_fault_profile(part) for part in parts])
     if name_or_path in BUILTIN_PROFILES:
         return builtin_profile(name_or_path)
     path = Path(name_or_path)

@@ -257,7 +257,7 @@ class LocalDrive:
         self.planner.set_path(path, now)
         self._path = path
         length = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in itertools.pairwise(path))
-        if length > self._best + self.DETOUR:  # a longer way round: progress counts from here
+        if not math.isfinite(self._best) or length > self._best + self.DETOUR:  # (a longer way round) counts from here
             self._best, self._t_best = length, now
         if same:
             return
@@ -414,9 +414,11 @@ class LocalDrive:
                 if (yield from self._turn_to(self.goal.theta)):
                     return
                 continue  # a contact while turning: it backed off and re-planned
-            if cmd.path_blocked and now - self._last_replan >= cfg.replan_interval:
+            replanned = cmd.path_blocked and now - self._last_replan >= cfg.replan_interval and \
                 self._replan(now, "blocked")
-            if self._giving_way(cmd.circles, st.pose):
+            if replanned:
+                pass  # this tick's remaining length was the old path's
+            elif self._giving_way(cmd.circles, st.pose):
                 self._t_best += dt  # waiting for someone walking by is no standstill
             elif self._stuck(cmd.dwa.remaining, now):
                 yield from self._recover("stuck: no progress along the path")
