@@ -232,11 +232,12 @@ class LocalDrive:
         near = np.hypot(xy[..., 0] - pose.x, xy[..., 1] - pose.y) <= lim.radius + self.config.margin + grid.resolution
         return replace(cm, blocked=cm.blocked & ~(near & (cm.clearance > 0.0)))
 
-    def _plan(self, now: float, why: str) -> list[tuple[float, float]] | None:
-        """A* from the base's pose to the goal on :meth:`_inflated`, simplified, from the
-        base to the goal exactly; published and logged. None when there is no way."""
+    def _plan(self, now: float, why: str, *, on_static: bool = False) -> list[tuple[float, float]] | None:
+        """A* from the base's pose to the goal on :meth:`_inflated` (``on_static``: on the
+        static map alone), simplified, from the base to the goal exactly. None (logged)
+        when there is no way."""
         start = self.base.state().pose
-        cm = self._inflated(now)
+        cm = self.static if on_static else self._inflated(now)
         gx, gy = self.goal.x, self.goal.y
         if not cm.is_free(gx, gy) and self.config.goal_search > 0:
             free = cm.nearest_free(gx, gy, self.config.goal_search)
@@ -358,12 +359,19 @@ class LocalDrive:
                 else [(self.goal.x, self.goal.y)]
             why = "given"
         else:
-            planned = self._plan(now, "start")
+            why = "start"
+            planned = self._plan(now, why)
+            if planned is None:
+                # what the lidar marked closes every way now: start on the map's own way
+                # (the marks may be someone standing by; a re-plan, or the recoveries, decide)
+                why = "start on the map"
+                planned = self._plan(now, why, on_static=True)
+                self._no_way = planned is not None
             if planned is None:
                 self.status(ctx, "goal_fail", goal=[self.goal.x, self.goal.y, self.goal.theta], reason="no path")
                 self.status(ctx, "idle")
                 raise SkillFailure(FailureKind.PLANNING, f"no path to {self.label} ({self.goal.x:.2f}, {self.goal.y:.2f})")
-            path, why = planned, "start"
+            path = planned
         self._follow_path(path, why, now)
         self.status(ctx, "to_goal", goal=_rounded([self.goal.x, self.goal.y, self.goal.theta]), label=self.label)
         try:
