@@ -21,7 +21,9 @@ for folder in FOLDERS:
         packages.append(name)
         package_dir[name] = folder + ("/" + sub.replace(".", "/") if sub else "")
 
-DATA = ["*.yaml", "*.yml", "*.urdf", "*.pgm", "*.md", "*.png", "*.json", "**/*.yaml", "**/*.urdf", "**/*.pgm"]
+DATA = ["*.yaml", "*.yml", "*.urdf", "*.pgm", "*.md", "*.png", "*.json", "**/*.yaml", "**/*.urdf", "**/*.pgm",
+        # the browser console of `mmexec serve` (executive/serve/static/)
+        "static/*.html", "static/*.js", "static/*.css", "static/*.svg", "static/*.png", "static/*.txt"]
 
 setup(
     packages=packages,

@@ -6,7 +6,8 @@ Every error is JSON ``{"error": "one line"}`` with a 4xx status: 401 no or wrong
 429 queue full. Off loopback every call, the WebSocket included, needs the token:
 ``Authorization: Bearer TOKEN`` (or ``?token=TOKEN`` for a WebSocket, which browsers
 cannot give headers). CORS is closed unless ``serve.cors_origins`` names origins. The
-server serves no files. Shapes: docs/console.md.
+only files served are the browser console's (``/console/``, from the package's
+``static/`` folder, no token needed: they hold no data). Shapes: docs/console.md.
 """
 
 from __future__ import annotations
@@ -21,12 +22,13 @@ from typing import Any, Literal
 
 from fastapi import Body, FastAPI, Query, Request, WebSocket, WebSocketDisconnect
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import JSONResponse, RedirectResponse, Response
 from pydantic import BaseModel, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from mmexec.executive.serve.console import CONSOLE_CSP, static_assets
 from mmexec.executive.serve.prompts import PromptAnsweredError, PromptClosedError
-from mmexec.executive.serve.service import TOPICS, Service, ServiceError
+from mmexec.executive.serve.service import RECENT_EVENTS, TOPICS, Service, ServiceError
 from mmexec.skills.operator import AnswerError
 
 __all__ = ["create_app"]
@@ -38,6 +40,8 @@ Message = MutableMapping[str, Any]
 Receive = Callable[[], Awaitable[Message]]
 Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
+#: where the browser console is served
+CONSOLE_PREFIX = "/console"
 
 
 class AnswerBody(BaseModel):
@@ -72,7 +76,8 @@ class Guard:
         if kind not in ("http", "websocket"):
             await self.app(scope, receive, send)
             return
-        if self.token is not None and not self._authorised(scope) and not self._preflight(scope):
+        if (self.token is not None and not self._authorised(scope) and not self._preflight(scope)
+                and not self._console_file(scope)):
             if kind == "websocket":
                 await send({"type": "websocket.close", "code": 4401, "reason": "token required"})
                 return
@@ -125,6 +130,14 @@ class Guard:
         names = {name for name, _ in scope.get("headers") or []}
         return b"origin" in names and b"access-control-request-method" in names
 
+    @staticmethod
+    def _console_file(scope: Scope) -> bool:
+        """The console's static files need no token (a browser cannot send one with a page
+        load; they hold no data): the page asks for the token and sends it with each call."""
+        path = scope.get("path", "")
+        return (scope["type"] == "http" and scope["method"] in ("GET", "HEAD")
+                and (path == CONSOLE_PREFIX or path.startswith(CONSOLE_PREFIX + "/")))
+
     def _authorised(self, scope: Scope) -> bool:
         assert self.token is not None
         given = ""
@@ -164,7 +177,33 @@ def create_app(service: Service, *, token: str | None = None) -> Any:
     @app.get("/", summary="What this server offers")
     def index() -> dict[str, Any]:
         return {"service": "mmexec", "api": "/api/status", "stream": "/api/stream", "openapi": "/openapi.json",
-                "docs": "/docs"}
+                "docs": "/docs", "console": CONSOLE_PREFIX + "/"}
+
+    assets = static_assets()
+
+    @app.api_route(CONSOLE_PREFIX, methods=["GET", "HEAD"], include_in_schema=False)
+    def console_root() -> Response:
+        return RedirectResponse(CONSOLE_PREFIX + "/", status_code=307)
+
+    @app.api_route(CONSOLE_PREFIX + "/{name:path}", methods=["GET", "HEAD"], include_in_schema=False)
+    def console_file(name: str) -> Response:
+        """The browser console: only the files of the package's static folder, listed when
+        the app was made (no path from the URL reaches the file system)."""
+        asset = assets.get(name or "index.html")
+        if asset is None:
+            raise ServiceError(404, f"GET {CONSOLE_PREFIX}/{name}: no such console file")
+        headers = {"Cache-Control": "no-cache", "X-Content-Type-Options": "nosniff"}
+        if asset.content_type == "text/html":
+            headers["Content-Security-Policy"] = CONSOLE_CSP
+        return Response(asset.path.read_bytes(), media_type=asset.content_type, headers=headers)
+
+    @app.get("/api/mission", summary="The mission: its request fields (the request form) and its nodes")
+    def mission() -> dict[str, Any]:
+        return service.describe()
+
+    @app.get("/api/events", summary="The last event-log records (oldest first)")
+    def events(limit: int = Query(200, ge=0, le=RECENT_EVENTS, description="how many")) -> list[dict[str, Any]]:
+        return service.events(limit)
 
     @app.get("/api/status", summary="The executive's state, the running request, queue length, counts")
     def status() -> dict[str, Any]:

@@ -21,8 +21,9 @@ the requests served, 1, 2, ..., as in a ``run`` log), so every accepted request 
 exactly one ``request_end`` or ``request_dropped``.
 
 Streams (:class:`Hub`): every event-log record, tree snapshots, status, robot pose, path,
-map, scan, camera frames (JPEG, rate-limited) and operator prompts, each a JSON message
-``{"type": TOPIC, "data": ...}`` (shapes in docs/console.md).
+map, scan, camera frames (JPEG, rate-limited, with marker detections), operator prompts,
+the running tree's blackboard, the world model's markers and tracked people, each a JSON
+message ``{"type": TOPIC, "data": ...}`` (shapes in docs/console.md).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from typing import Any, Protocol
 from mmexec.drivers.interfaces import CameraFrame, LaserScan, Robot
 from mmexec.executive.eventlog import to_jsonable
 from mmexec.executive.runner import RequestResult, Runner, RunOptions
+from mmexec.executive.serve.console import ConsoleWorld, mission_json
 from mmexec.executive.serve.prompts import PromptBoard
 from mmexec.executive.serve.settings import ServeSettings, parse_section
 from mmexec.skills.operator import OPERATOR_KEY
@@ -67,10 +69,13 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Stream topics a WebSocket client may subscribe to.
-TOPICS = ("status", "tree", "event", "pose", "path", "map", "scan", "camera", "prompt")
+TOPICS = ("status", "tree", "event", "pose", "path", "map", "scan", "camera", "prompt", "blackboard", "markers",
+          "people", "detections")
 #: ``ctx.world`` key where a navigation skill may publish its current path: a list of
 #: [x, y] points in ``map`` [m]; streamed as ``path`` whenever it is replaced.
 WORLD_PATH = "nav.path"
+#: Event-log records kept for ``GET /api/events`` (the console's log tail on connect).
+RECENT_EVENTS = 1000
 #: Messages a slow WebSocket client may have waiting before new ones are dropped.
 CLIENT_QUEUE = 2000
 #: [wall s] longest idle wait on a stepped clock before the loop looks again.
@@ -79,7 +84,7 @@ IDLE_WAIT = 0.1
 STREAM_JPEG_QUALITY = 70
 #: [wall Hz] how often the status is streamed while nothing else changes it
 STATUS_HZ = 2.0
-_STICKY = ("status", "map", "pose", "path")
+_STICKY = ("status", "map", "pose", "path", "blackboard", "markers", "people", "camera", "detections")
 
 
 class ServiceError(Exception):
@@ -258,11 +263,15 @@ class Service:
         self.t = 0.0
         self.tip = ""
         self.info: dict[str, Any] = {}  # mission, backend, log: see set_info
+        self.mission_info: dict[str, Any] | None = None  # GET /api/mission (see describe)
+        self._recent: deque[dict[str, Any]] = deque(maxlen=RECENT_EVENTS)
 
     def configure(self, mission: Any, settings: ServeSettings) -> None:
         """Set the mission requests are checked against and the settings (before serving)."""
+        info = mission_json(mission)
         with self._lock:
             self.mission = mission
+            self.mission_info = info
             self.settings = settings
             self._finished = deque(self._finished, maxlen=settings.history)
 
@@ -388,6 +397,30 @@ class Service:
 
     def _changed(self) -> None:
         self._wake.set()
+
+    def describe(self) -> dict[str, Any]:
+        """The mission as the console shows it (``GET /api/mission``: request fields, node
+        kinds and branch labels, see :func:`~mmexec.executive.serve.console.mission_json`)."""
+        with self._lock:
+            info, mission = self.mission_info, self.mission
+        if info is None:
+            if mission is None:
+                raise ServiceError(409, "GET /api/mission: no mission is loaded yet")
+            info = mission_json(mission)
+            with self._lock:
+                self.mission_info = info
+        return info
+
+    def events(self, limit: int) -> list[dict[str, Any]]:
+        """The last ``limit`` event-log records (at most :data:`RECENT_EVENTS`), oldest first."""
+        with self._lock:
+            recent = list(self._recent)
+        return recent[-limit:] if limit > 0 else []
+
+    def keep_event(self, record: dict[str, Any]) -> None:
+        """Keep an event-log record for :meth:`events` (tick thread)."""
+        with self._lock:
+            self._recent.append(record)
 
     def open_prompts(self) -> list[dict[str, Any]]:
         """The open prompts as the API and the stream show them (P in docs/console.md)."""
@@ -706,6 +739,9 @@ class ServeRunner(Runner):
         #: the live streams: to the console, and to Foxglove / MCAP sinks added before run()
         self.streams = Streams(self.world)
         self.streams.add_sink(ConsoleSink(service))
+        #: the browser console's own streams (blackboard, markers, people, detections)
+        self.console = ConsoleWorld(service, self.world)
+        self.streams.add_sink(self.console)
         self._period = 0.05
         self._request_id = 0  # the service id of the request being served
         self.add_log_listener(self.streams.on_record)
@@ -715,6 +751,7 @@ class ServeRunner(Runner):
         """As :meth:`Runner.prepare`, then the config's ``serve:`` section (InputError)."""
         super().prepare()
         assert self.config is not None
+        self.mission = self.console.watch(self.mission)  # the console streams each tree's blackboard
         settings = parse_section(self.config.config.serve, self.config.mark("serve"))
         self.service.configure(self.mission, settings)
         self.service.set_info(mission=getattr(self.mission, "name", ""), backend=self.config.backend)
@@ -776,6 +813,7 @@ class ServeRunner(Runner):
         self._period = 1.0 / rate
         self.service.set_info(backend=self.config.backend, log=str(self.log_path))
         self.streams.start(self.robot)  # taps the sensors, sends the map
+        self.console.start(self.robot)
 
     # tick thread: between ticks of a request, and while idle
     def _between_ticks(self, robot: Robot, period: float) -> None:
