@@ -24,7 +24,7 @@ Each fault exercises one recovery path of a mission (see docs/sim.md):
   waypoints: 3}``: that many people walk loops through the room (:func:`crowd_people`),
   on top of the world's own ``people``;
 * ``clutter``: ``{count: 3, size: [0.25, 0.45], height: [0.7, 1.0], near: 0.5,
-  keep_clear: 0.5, passage: null}``: that many boxes the map does not show stand near
+  keep_clear: 0.8, passage: null}``: that many boxes the map does not show stand near
   the robot's routes, always leaving a way through (:func:`clutter_obstacles`).
 
 Randomness comes from the backend's seeded generator, so a seed reproduces the faults;
@@ -147,7 +147,9 @@ class Clutter:
     sides drawn from ``size`` [m], heights from ``height`` [m] (the LoCoBot's lidar scans
     at 0.64 m: a lower box is only found by the bumper), each centred within ``near``
     [m] of a route (the shortest ways between the start, the stand-offs in front of the
-    items and the depot), none within ``keep_clear`` [m] of those places, and always
+    items and the depot), none within ``keep_clear`` [m] of those places (edge to place:
+    a goal closer to a box than a local planner's safety zone could never be reached; the
+    LoCoBot's zone round a box seen from one side reaches 0.6 m), and always
     leaving a ``passage`` [m] wide way between them (None: the robot's footprint
     diameter plus 0.3 m)."""
 
@@ -155,7 +157,7 @@ class Clutter:
     size: tuple[float, float] = (0.25, 0.45)
     height: tuple[float, float] = (0.7, 1.0)
     near: float = 0.5
-    keep_clear: float = 0.5
+    keep_clear: float = 0.8
     passage: float | None = None
 
     def validate(self) -> list[str]:
@@ -357,7 +359,8 @@ def clutter_obstacles(world: World, clutter: Clutter, seed: int | None, robot_ra
     free = _FreeSpace(world)
     passage = clutter.passage if clutter.passage is not None else 2.0 * robot_radius + 0.3
     half_pass = passage / 2
-    places = [q for q in _places(world, free) if free.clearance(*q) >= half_pass]
+    stops = _places(world, free)  # every one kept clear; those with room for the passage kept connected
+    places = [q for q in stops if free.clearance(*q) >= half_pass]
     cells = [free.cell(*q) for q in places]
     passable = free.dist >= half_pass
     if len(cells) < 2 or not _connected(passable, cells):
@@ -386,7 +389,7 @@ def clutter_obstacles(world: World, clutter: Clutter, seed: int | None, robot_ra
             reach = 0.5 * math.hypot(lx, ly)
             if occupied[free.cell(x, y)] < reach + 0.02:
                 continue  # on the static geometry or another box
-            if any(math.hypot(x - q[0], y - q[1]) < clutter.keep_clear + reach for q in places):
+            if any(math.hypot(x - q[0], y - q[1]) < clutter.keep_clear + reach for q in stops):
                 continue
             dx, dy = X - x, Y - y
             u = math.cos(yaw) * dx + math.sin(yaw) * dy

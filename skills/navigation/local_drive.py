@@ -19,8 +19,9 @@ the rolling lidar costmap, then the CLF-CBF filter against the tracked obstacle 
      DWA stops in front of the obstacle and the stuck recovery takes over);
    * **stuck** (no progress along the path for the DWA's ``stuck_time``) -> *recovery*:
      brake, turn in place once round (the lidar clears the marks of what has moved away
-     and sees what is around), back off ``nav.recovery_back_off`` where the costmap and
-     the circles leave room behind, re-plan; after ``nav.recoveries`` of them the drive
+     and sees what is around; only with :data:`RECOVERY_TURN_ROOM` to spare round the
+     footprint, since an arm held out sweeps past it), back off
+     ``nav.recovery_back_off`` where the costmap and the circles leave room behind, re-plan; after ``nav.recoveries`` of them the drive
      fails: EXECUTION "stuck on the way to ..." or, when no way was found at the last
      re-plan, PLANNING "no path to ...: blocked by obstacles the map does not show";
    * **goal reached** -> brake, turn to the goal heading, done.
@@ -99,6 +100,9 @@ CONTACT_BEARINGS = {"left": math.pi / 4, "centre": 0.0, "right": -math.pi / 4}
 CONTACT_CLEAR_TIME = 2.0
 #: [m/s] backing-off speed (recoveries and contacts)
 BACK_OFF_SPEED = 0.1
+#: [m] room beyond the footprint a recovery needs round the base to turn once round: an
+#: arm held out (carrying) reaches past the footprint, and swept into furniture it hit it
+RECOVERY_TURN_ROOM = 0.25
 
 
 @dataclass(frozen=True)
@@ -299,6 +303,18 @@ class LocalDrive:
         moving = np.hypot(people.velocities[:, 0], people.velocities[:, 1]) > cfg.tracking.moving_speed
         return bool(np.any(moving & (gap < cfg.social.slow_gap)))
 
+    def _goal_guarded(self) -> float | None:
+        """The goal's distance [m] to the nearest non-person circle whose safety zone (its
+        radius plus the filter's look-ahead) holds the goal, or None: a goal the filter
+        keeps the base from ever reaching."""
+        c = self.planner.circles_at(self.ctx.clock.now())
+        c = c.select(~c.person)
+        if not len(c):
+            return None
+        d = np.hypot(c.centres[:, 0] - self.goal.x, c.centres[:, 1] - self.goal.y)
+        inside = d < c.safety_radii + self.config.planner.cbf.lookahead
+        return float(d[inside].min()) if inside.any() else None
+
     def _restart_progress(self, now: float) -> None:
         self._best, self._t_best = math.inf, now
 
@@ -467,7 +483,8 @@ class LocalDrive:
                               goal_heading=self.goal.theta)
         self._follow_path([(start.x, start.y), (self.goal.x, self.goal.y)], "dock", ctx.clock.now())
         last = ctx.clock.now()
-        held_since: float | None = None  # since when the filter has held the tracker back
+        # progress: distance to the goal (then heading error while aligning), its best and when
+        phase, best, t_best = tracker.phase, math.inf, last
         u = (base.state().v, base.state().w)
         while True:
             faults = self._check_faults()
@@ -496,12 +513,18 @@ class LocalDrive:
             circles = self.planner.circles_at(now)
             if len(circles):
                 f = self.planner.cbf.filter(st.pose, (v, w), None, circles, u, dt, max(v, 0.0))
-                held = (abs(f.v - v) > 0.01 or abs(f.w - w) > 0.05) and not self._giving_way(circles, st.pose)
-                held_since = (held_since if held_since is not None else now) if held else None
                 v, w = f.v, f.w
-                if held_since is not None and now - held_since > self.config.planner.dwa.stuck_time:
-                    yield from self._recover("docking held back by the safety filter")
-                    return False
+            if tracker.phase != phase:
+                phase, best, t_best = tracker.phase, math.inf, now
+            progress = (abs(wrap_angle(self.goal.theta - st.pose.theta)) if phase == "align"
+                        else math.hypot(self.goal.x - st.pose.x, self.goal.y - st.pose.y))
+            if progress < best - 0.01:
+                best, t_best = progress, now
+            elif self._giving_way(circles, st.pose):
+                t_best += dt
+            elif now - t_best > self.config.planner.dwa.stuck_time:
+                yield from self._recover("docking held back by the safety filter")
+                return False
             u = (v, w)
             base.set_velocity(v, w)
             yield
@@ -599,6 +622,11 @@ class LocalDrive:
         ctx = self.ctx
         self.recoveries += 1
         if self.recoveries > self.config.recoveries:
+            inside = self._goal_guarded()
+            if inside is not None:
+                raise self._fail(FailureKind.PLANNING,
+                                 f"no path to {self.label}: the goal is {inside:.2f} m from an obstacle the map does "
+                                 f"not show, inside the zone the safety filter keeps the base out of", "blocked")
             if self._no_way:
                 raise self._fail(FailureKind.PLANNING,
                                  f"no path to {self.label}: blocked by obstacles the map does not show "
@@ -619,7 +647,13 @@ class LocalDrive:
             last[0] = theta
             return 2.0 * math.pi - turned[0]
 
-        yield from self._turn(once_round, None)
+        here = self.base.state().pose
+        room_round = float(self.planner.costmap.clearance_at(np.array([[here.x, here.y]]))[0]) - \
+            self.config.planner.limits.radius
+        if room_round >= RECOVERY_TURN_ROOM:
+            yield from self._turn(once_round, None)
+        else:
+            log.info("%s: recovery without the turn: %.2f m round the footprint", self.label, room_round)
         room = self._room_behind(self.base.state().pose, self.config.back_off)
         if room > 0.02:
             yield from self._back_off(room)

@@ -220,14 +220,14 @@ def test_the_crowd_walks_clear_loops_and_is_reproducible():
 
 
 def test_clutter_boxes_are_unmapped_near_the_routes_and_leave_a_way_through():
-    w = load_world("lab", seed=2, randomize=True)
-    obstacles, people = world_extras(w, FaultConfig(clutter=Clutter(count=3)), 2, 0.178)
-    assert people == () and 1 <= len(obstacles) <= 3
+    w = load_world("lab", seed=6, randomize=True)  # the small lab has room for all three at this seed
+    obstacles, people = world_extras(w, FaultConfig(clutter=Clutter(count=3)), 6, 0.178)
+    assert people == () and len(obstacles) == 3
     assert all(o.unmapped and o.name.startswith("clutter_") for o in obstacles)
+    places = _places(w, _FreeSpace(w))  # the places the boxes were kept clear of
     cluttered = replace(w, obstacles=w.obstacles + obstacles)
     free = _FreeSpace(cluttered)
-    places = _places(cluttered, free)
-    assert all(min(math.hypot(o.pose[0] - q[0], o.pose[1] - q[1]) for q in places) >= 0.5 for o in obstacles)
+    assert all(min(math.hypot(o.pose[0] - q[0], o.pose[1] - q[1]) for q in places) >= 0.8 for o in obstacles)
     half = (2 * 0.178 + 0.3) / 2
     assert _connected(free.dist >= half, [free.cell(*q) for q in places if free.clearance(*q) >= half])
     # the map the robot is given does not hold them
