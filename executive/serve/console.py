@@ -209,14 +209,13 @@ class ConsoleWorld:
     * ``detections``: markers found on the camera frames the console is sent, with the
       frame's time (the console draws them on the image of that time);
 
-    and keeps every event record for ``GET /api/events`` and the robot's facts (footprint
-    radius, lidar mount) in the status. :meth:`watch` wraps the mission so that each tree
+    and keeps every event record for ``GET /api/events`` and the robot's facts (name,
+    footprint radius) in the status. :meth:`watch` wraps the mission so that each tree
     built for a request is known (its blackboard)."""
 
     def __init__(self, service: Any, world: Mapping[str, Any]) -> None:
         self.service = service
         self.world = world
-        self.robot: dict[str, Any] = {}
         self._tree: Any = None
         self._bb_text = ""
         self._bb_due = 0.0
@@ -231,9 +230,8 @@ class ConsoleWorld:
 
     def start(self, robot: Any) -> None:
         """Once the robot is up: its name and footprint radius [m] in the status."""
-        self.robot = {"name": robot.name, "footprint_radius": robot.base.radius if robot.base is not None else None,
-                      "lidar": None}
-        self.service.set_info(robot=dict(self.robot))
+        self.service.set_info(robot={"name": robot.name,
+                                     "footprint_radius": robot.base.radius if robot.base is not None else None})
 
     # StreamSink
     def refresh(self, t: float) -> bool:
@@ -253,8 +251,6 @@ class ConsoleWorld:
     def wants(self, topic: str, t: float) -> bool:
         if topic == "event":
             return True
-        if topic == "scan":
-            return self.robot.get("lidar", 0) is None  # once, for the mount
         if topic == "camera" and self.service.hub.wants("detections"):
             now = time.monotonic()  # the console sink's rate: both are sent the same frames
             if now >= self._camera_due:
@@ -267,11 +263,6 @@ class ConsoleWorld:
             self.service.keep_event(data)
             if data.get("event") == "request_end":
                 self._publish_blackboard(t, force=True)
-        elif topic == "scan":
-            mount = np.asarray(data.T_base_lidar)
-            self.robot["lidar"] = [float(mount[0, 3]), float(mount[1, 3]),
-                                   math.atan2(float(mount[1, 0]), float(mount[0, 0]))]
-            self.service.set_info(robot=dict(self.robot))
         elif topic == "camera":
             frame = data.frame
             h, w = frame.rgb.shape[:2]

@@ -141,7 +141,8 @@ def serve(options: RunOptions, bind: str, *, out: TextIO, err: TextIO,
         port = sock.getsockname()[1]
         url = addr.url(port)
         runner.say(f"mmexec serve: {getattr(runner.mission, 'name', '')} on backend {runner.config.backend!r}: "
-                   f"{url}/api/status, stream {url.replace('http', 'ws', 1)}/api/stream, API description {url}/docs")
+                   f"{url}/api/status, stream {url.replace('http', 'ws', 1)}/api/stream, API description {url}/docs, "
+                   f"console {url}/console/")
         if token is not None:
             where = runner.config.path.parent / str(service.settings.token_file) if from_file else token
             runner.say(f"token: {where} (every call needs 'Authorization: Bearer TOKEN')")

@@ -698,6 +698,7 @@ class ConsoleSink:
         self.service = service
         self._joined = 0  # stream clients seen so far
         self._due: dict[str, float] = {}
+        self._pose: Any = None  # the base pose of this tick, sent with a scan (the console draws it from there)
 
     def refresh(self, t: float) -> bool:
         hub = self.service.hub
@@ -710,12 +711,23 @@ class ConsoleSink:
     def wants(self, topic: str, t: float) -> bool:
         if topic in ("map", "path"):
             return True  # sticky: kept for the clients still to come
+        if topic == "pose":  # every tick (a scan goes with its pose); sent at pose_hz
+            return self.service.hub.wants("pose") or self.service.hub.wants("scan")
         s = self.service.settings
         hz = {"pose": s.pose_hz, "scan": s.scan_hz, "camera": s.camera_hz}.get(topic)
         return self.service.hub.wants(topic) and (hz is None or self._is_due(topic, hz))
 
     def send(self, topic: str, data: Any, t: float) -> None:
-        self.service.hub.publish(topic, console_message(topic, data, t))
+        if topic == "pose":
+            self._pose = data.pose
+            if not (self.service.hub.wants("pose") and self._is_due("pose", self.service.settings.pose_hz)):
+                return
+        message = console_message(topic, data, t)
+        if topic == "scan":
+            m = data.T_base_lidar  # the lidar's mount in base_link, planar: [x, y, yaw]
+            message["lidar"] = [float(m[0][3]), float(m[1][3]), math.atan2(float(m[1][0]), float(m[0][0]))]
+            message["pose"] = None if self._pose is None else [self._pose.x, self._pose.y, self._pose.theta]
+        self.service.hub.publish(topic, message)
 
     def _is_due(self, topic: str, hz: float) -> bool:
         """Rate limit [wall Hz]: True at most ``hz`` times a second per topic."""

@@ -229,11 +229,24 @@ def test_blackboard_markers_people_and_robot_facts(live: Any) -> None:
     assert people == [{"id": 0, "x": 1.0, "y": 2.0, "vx": 0.5, "vy": -0.25},
                       {"id": "p9", "x": 3.0, "y": 4.0, "vx": 0.0, "vy": 0.0}]
     robot = c.get("/api/status").json()["robot"]
-    assert robot["name"] and robot["footprint_radius"] > 0 and len(robot["lidar"]) == 3
+    assert robot["name"] == "mock" and robot["footprint_radius"] > 0
     with c.websocket_connect("/api/stream?topics=blackboard,markers") as ws:  # sticky: a new client gets them
         assert ws.receive_json()["type"] == "hello"
         kinds = {ws.receive_json()["type"], ws.receive_json()["type"]}
     assert kinds == {"blackboard", "markers"}
+
+
+def test_a_scan_comes_with_the_base_pose_and_the_lidar_mount(live: Any) -> None:
+    svc = live()
+    c = svc.client
+    svc.runner.add_tick_hook(lambda robot, period: robot.lidar.scan())  # as a skill reading the lidar
+    with c.websocket_connect("/api/stream?topics=scan") as ws:  # no pose subscriber: the scan still has it
+        assert ws.receive_json()["type"] == "hello"
+        c.post("/api/requests", json={"item": 1})
+        scan = _messages(ws, lambda m: m["type"] == "scan")[-1]["data"]
+    mount = svc.runner.robot.lidar.scan().T_base_lidar
+    assert scan["lidar"] == pytest.approx([mount[0, 3], mount[1, 3], math.atan2(mount[1, 0], mount[0, 0])])
+    assert len(scan["pose"]) == 3 and all(math.isfinite(v) for v in scan["pose"])
 
 
 def test_detections_come_with_the_camera_frame_they_belong_to(live: Any) -> None:

@@ -253,8 +253,25 @@ def shots(tmp_path: Path) -> Iterator[Callable[[Any, str], Path]]:
     print(f"console screenshots: {folder} ({len(taken)})")
 
 
-def _pose_text(page: Any) -> str:
-    return str(page.inner_text("#pose"))
+def _report_failure(page: Any, shots: Callable[[Any, str], Path], servers: list[Served | None]) -> None:
+    """What a failure needs to be understood: the page as it was, each service's output
+    and its log's last records."""
+    try:
+        print(f"screenshot of the failure: {shots(page, 'failure')}")
+    except Exception as e:  # noqa: BLE001 - the report must not hide the failure
+        print(f"no screenshot of the failure: {e}")
+    for served in servers:
+        if served is None:
+            continue
+        print(f"--- {served.log_path.name}: output", *served.out.lines, sep="\n")
+        records = read_log(served.log_path) if served.log_path.exists() else []
+        print(f"--- {served.log_path.name}: last records", *(str(r)[:300] for r in records[-15:]), sep="\n")
+
+
+def _pose_x(page: Any) -> float:
+    """The x [m] of the pose the map's readout shows (-inf before one)."""
+    m = re.search(r"x (\S+) m", str(page.inner_text("#pose")))
+    return float(m.group(1)) if m else -math.inf
 
 
 def test_console_in_chromium(tmp_path: Path, shots: Callable[[Any, str], Path]) -> None:
@@ -271,130 +288,134 @@ def test_console_in_chromium(tmp_path: Path, shots: Callable[[Any, str], Path]) 
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
             expect.set_options(timeout=PATIENCE * 1000)
+            try:
+                # ---------------------------------------------------------------- 1. open, submit two
+                page.goto(first.url + "/console/")
+                expect(page.locator("#conn")).to_have_text("live")
+                expect(page.locator("#mission-name")).to_have_text("fetch_item")
+                expect(page.locator("#field-item")).to_be_visible()
+                expect(page.locator("#pose")).to_contain_text("x 1.50 m  y 2.00 m")  # home, before anything moves
+                page.evaluate("""() => {  // every pose and tree change the page shows, as it shows them
+                    window.seen = {poses: new Set(), nodes: new Set()};
+                    new MutationObserver(() => window.seen.poses.add(document.getElementById('pose').textContent))
+                        .observe(document.getElementById('pose'), {childList: true, characterData: true, subtree: true});
+                    new MutationObserver((records) => records.forEach((r) =>
+                            window.seen.nodes.add(r.target.dataset.path + ' ' + r.target.dataset.status)))
+                        .observe(document.getElementById('tree'), {attributes: true, subtree: true,
+                                                                   attributeFilter: ['data-status']});
+                }""")
+                shots(page, "open")
+                for item in ("3", "5"):
+                    page.fill("#field-item", item)
+                    page.click("#submit")
+                expect(page.locator('#queue li[data-request="2"]')).to_have_attribute("data-state", "queued")
 
-            # ---------------------------------------------------------------- 1. open, submit two
-            page.goto(first.url + "/console/")
-            expect(page.locator("#conn")).to_have_text("live")
-            expect(page.locator("#mission-name")).to_have_text("fetch_item")
-            expect(page.locator("#field-item")).to_be_visible()
-            expect(page.locator("#pose")).to_contain_text("x 1.50 m  y 2.00 m")  # home, before anything moves
-            page.evaluate("""() => {  // every pose and tree change the page shows, as it shows them
-                window.seen = {poses: new Set(), nodes: new Set()};
-                new MutationObserver(() => window.seen.poses.add(document.getElementById('pose').textContent))
-                    .observe(document.getElementById('pose'), {childList: true, characterData: true, subtree: true});
-                new MutationObserver((records) => records.forEach((r) =>
-                        window.seen.nodes.add(r.target.dataset.path + ' ' + r.target.dataset.status)))
-                    .observe(document.getElementById('tree'), {attributes: true, subtree: true,
-                                                               attributeFilter: ['data-status']});
-            }""")
-            shots(page, "open")
-            for item in ("3", "5"):
-                page.fill("#field-item", item)
+                # ---------------------------------------------------------------- live tree and pose
+                _wait(gate.holding.is_set, "the arm moving during pick")
+                expect(page.locator(f'li[data-path="{PICK}"]')).to_have_attribute("data-status", "RUNNING")
+                expect(page.locator('li[data-path="fetch_item/pick_item/sequence/find"]')).to_have_attribute(
+                    "data-status", "SUCCESS")
+                _wait(lambda: _pose_x(page) > 3.5, "the pose at the shelf")
+                seen = page.evaluate("() => ({poses: window.seen.poses.size, nodes: window.seen.nodes.size})")
+                assert seen["poses"] >= 3 and seen["nodes"] >= 10, seen  # it changed on the page, not after a reload
+                page.click(f'li[data-path="{PICK}"] > .row')
+                expect(page.locator("#node-info")).to_contain_text("pick(marker={request.item})")
+                expect(page.locator("#node-info")).to_contain_text(re.compile(r"request\.item\s*3"))  # the blackboard
+                expect(page.locator("#camera-info")).to_contain_text("detection")
+                page.click("#bb-all summary")
+                expect(page.locator("#bb-table")).to_contain_text("pick_item.attempts")
+                shots(page, "live-tree-and-pose")
+
+                # ---------------------------------------------------------------- cancel 2, submit 3
+                page.click('#queue li[data-request="2"] button.cancel')
+                expect(page.locator('#finished li[data-request="2"]')).to_have_attribute("data-state", "dropped")
+                page.fill("#field-item", "6")
                 page.click("#submit")
-            expect(page.locator('#queue li[data-request="2"]')).to_have_attribute("data-state", "queued")
+                expect(page.locator('#queue li[data-request="3"]')).to_have_attribute("data-state", "queued")
+                shots(page, "cancelled-and-resubmitted")
 
-            # ---------------------------------------------------------------- live tree and pose
-            _wait(gate.holding.is_set, "the arm moving during pick")
-            expect(page.locator(f'li[data-path="{PICK}"]')).to_have_attribute("data-status", "RUNNING")
-            expect(page.locator('li[data-path="fetch_item/pick_item/sequence/find"]')).to_have_attribute(
-                "data-status", "SUCCESS")
-            _wait(lambda: float(re.search(r"x (\S+) m", _pose_text(page)).group(1)) > 3.5,  # type: ignore[union-attr]
-                  "the pose at the shelf")
-            seen = page.evaluate("() => ({poses: window.seen.poses.size, nodes: window.seen.nodes.size})")
-            assert seen["poses"] >= 3 and seen["nodes"] >= 10, seen  # it changed on the page, not after a reload
-            page.click(f'li[data-path="{PICK}"] > .row')
-            expect(page.locator("#node-info")).to_contain_text("pick(marker={request.item})")
-            expect(page.locator("#node-info")).to_contain_text(re.compile(r"request\.item\s*3"))  # the blackboard
-            expect(page.locator("#camera-info")).to_contain_text("detection")
-            shots(page, "live-tree-and-pose")
+                # ---------------------------------------------------------------- STOP while the arm moves
+                page.click("#stop")
+                expect(page.locator('#finished li[data-request="1"]')).to_have_attribute("data-state", "cancelled")
+                expect(page.locator("#state")).to_have_text("paused")
+                expect(page.locator(f'li[data-path="{PICK}"]')).to_have_class(re.compile(r"\bhalted\b"))
+                halt_row = page.locator("#log .entry.fail").filter(has=page.get_by_text("halt", exact=True))
+                expect(halt_row).to_contain_text("halted through the API")  # the log's failure, highlighted
+                shots(page, "stopped")
+                assert gate.pressed_at is not None and gate.moving_at_press > 0.05
+                halt = first.records("halt")
+                assert [h["detail"] for h in halt] == ["halted through the API"] and halt[0]["reason"] == "cancel"
+                assert halt[0]["t"] == gate.pressed_at  # taken at the next tick, which starts then
+                still = gate.still_from()
+                assert still - gate.pressed_at <= STOP_BOUND + 1e-6, (
+                    f"base and arm still {still - gate.pressed_at:.3f} s of sim time after STOP")
+                assert float(np.max(np.abs(gate.samples[-1][5]))) < 1e-3  # and at rest 0.4 s after the request's end
+                end = first.records("request_end")[0]
+                assert (end["id"], end["outcome"], end["reason"]) == (1, "cancelled", "halted through the API")
+                dropped = first.records("request_dropped")[0]
+                assert (dropped["id"], dropped["reason"]) == (2, "cancelled through the API")
+                assert first.records("paused")
 
-            # ---------------------------------------------------------------- cancel 2, submit 3
-            page.click('#queue li[data-request="2"] button.cancel')
-            expect(page.locator('#finished li[data-request="2"]')).to_have_attribute("data-state", "dropped")
-            page.fill("#field-item", "6")
-            page.click("#submit")
-            expect(page.locator('#queue li[data-request="3"]')).to_have_attribute("data-state", "queued")
-            shots(page, "cancelled-and-resubmitted")
+                # ---------------------------------------------------------------- 2. reload; restart
+                page.reload()
+                expect(page.locator("#conn")).to_have_text("live")
+                expect(page.locator('#finished li[data-request="1"]')).to_have_attribute("data-state", "cancelled")
+                expect(page.locator('#finished li[data-request="2"]')).to_have_attribute("data-state", "dropped")
+                expect(page.locator('#queue li[data-request="3"]')).to_have_attribute("data-state", "queued")
+                expect(page.locator("#state")).to_have_text("paused")
+                expect(page.locator(f'li[data-path="{PICK}"]')).to_have_attribute("data-status", "INVALID")
+                expect(page.locator(f'li[data-path="{PICK}"]')).to_have_class(re.compile(r"\bhalted\b"))  # from the log
+                expect(page.locator("#log .entry", has_text="request_dropped")).to_be_visible()
+                shots(page, "reloaded")
+                port = first.url.rsplit(":", 1)[1]
+                page.click("#shutdown")
+                page.click("#shutdown")  # confirm
+                assert first.join() == 0
+                expect(page.locator("#conn")).to_have_text("offline")
+                shots(page, "service-down")
+                assert first.records("request_dropped")[-1]["id"] == 3
 
-            # ---------------------------------------------------------------- STOP while the arm moves
-            page.click("#stop")
-            expect(page.locator('#finished li[data-request="1"]')).to_have_attribute("data-state", "cancelled")
-            expect(page.locator("#state")).to_have_text("paused")
-            expect(page.locator(f'li[data-path="{PICK}"]')).to_have_class(re.compile(r"\bhalted\b"))
-            halt_row = page.locator("#log .entry.fail").filter(has=page.get_by_text("halt", exact=True))
-            expect(halt_row).to_contain_text("halted through the API")  # the log's failure, highlighted
-            shots(page, "stopped")
-            assert gate.pressed_at is not None and gate.moving_at_press > 0.05
-            halt = first.records("halt")
-            assert [h["detail"] for h in halt] == ["halted through the API"] and halt[0]["reason"] == "cancel"
-            assert halt[0]["t"] == gate.pressed_at  # taken at the next tick, which starts then
-            still = gate.still_from()
-            assert still - gate.pressed_at <= STOP_BOUND + 1e-6, (
-                f"base and arm still {still - gate.pressed_at:.3f} s of sim time after STOP")
-            assert float(np.max(np.abs(gate.samples[-1][5]))) < 1e-3  # and at rest 0.4 s after the request's end
-            end = first.records("request_end")[0]
-            assert (end["id"], end["outcome"], end["reason"]) == (1, "cancelled", "halted through the API")
-            dropped = first.records("request_dropped")[0]
-            assert (dropped["id"], dropped["reason"]) == (2, "cancelled through the API")
-            assert first.records("paused")
+                second = Served(ASK_POINT, tmp_path / "ask.jsonl", f"127.0.0.1:{port}")
+                expect(page.locator("#conn")).to_have_text("live")
+                expect(page.locator("#mission-name")).to_have_text("ask_point")
+                expect(page.locator("#state")).to_have_text("idle")
+                expect(page.locator("#finished li[data-request]")).to_have_count(0)
 
-            # ---------------------------------------------------------------- 2. reload; restart
-            page.reload()
-            expect(page.locator("#conn")).to_have_text("live")
-            expect(page.locator('#finished li[data-request="1"]')).to_have_attribute("data-state", "cancelled")
-            expect(page.locator('#finished li[data-request="2"]')).to_have_attribute("data-state", "dropped")
-            expect(page.locator('#queue li[data-request="3"]')).to_have_attribute("data-state", "queued")
-            expect(page.locator("#state")).to_have_text("paused")
-            expect(page.locator(f'li[data-path="{PICK}"]')).to_have_attribute("data-status", "INVALID")
-            expect(page.locator(f'li[data-path="{PICK}"]')).to_have_class(re.compile(r"\bhalted\b"))  # from the log
-            expect(page.locator("#log .entry", has_text="request_dropped")).to_be_visible()
-            shots(page, "reloaded")
-            port = first.url.rsplit(":", 1)[1]
-            page.click("#shutdown")
-            page.click("#shutdown")  # confirm
-            assert first.join() == 0
-            expect(page.locator("#conn")).to_have_text("offline")
-            shots(page, "service-down")
-            assert first.records("request_dropped")[-1]["id"] == 3
+                # ---------------------------------------------------------------- 3. click prompt
+                page.fill("#field-item", "3")
+                page.click("#submit")
+                image = page.locator(".prompt.kind-point canvas")
+                expect(image).to_be_visible()
+                prompt = _wait(lambda: second.runner.service.open_prompts(), "the prompt")[0]
+                w, h = prompt["image_size"]
+                _wait(lambda: image.evaluate("c => c.width") == w, "the prompt's image loaded")
+                shots(page, "prompt")
+                box = image.bounding_box()
+                assert box is not None
+                x, y = round(box["width"] * 0.3), round(box["height"] * 0.6)
+                image.click(position={"x": x, "y": y})
+                expect(page.locator("#finished li[data-request='1']")).to_have_attribute("data-state", "success")
+                answer = second.records("operator_answer")[0]
+                assert answer["source"] == "console"
+                u, v = answer["answer"]  # the pixel clicked (the image is shown scaled: within a pixel)
+                assert abs(u - x * w / box["width"]) <= 1 and abs(v - y * h / box["height"]) <= 1, (u, v)
+                expect(page.locator("#prompt-card")).to_be_hidden()
+                page.click('li[data-path="ask_point/click"] > .row')  # its output on the blackboard
+                expect(page.locator("#node-info")).to_contain_text(re.compile(rf"pixel\s*\[{u:g},{v:g}\]"))
+                shots(page, "prompt-answered")
 
-            second = Served(ASK_POINT, tmp_path / "ask.jsonl", f"127.0.0.1:{port}")
-            expect(page.locator("#conn")).to_have_text("live")
-            expect(page.locator("#mission-name")).to_have_text("ask_point")
-            expect(page.locator("#state")).to_have_text("idle")
-            expect(page.locator("#finished li[data-request]")).to_have_count(0)
-
-            # ---------------------------------------------------------------- 3. click prompt
-            page.fill("#field-item", "3")
-            page.click("#submit")
-            image = page.locator(".prompt.kind-point canvas")
-            expect(image).to_be_visible()
-            prompt = _wait(lambda: second.runner.service.open_prompts(), "the prompt")[0]
-            w, h = prompt["image_size"]
-            _wait(lambda: image.evaluate("c => c.width") == w, "the prompt's image loaded")
-            shots(page, "prompt")
-            box = image.bounding_box()
-            assert box is not None
-            x, y = round(box["width"] * 0.3), round(box["height"] * 0.6)
-            image.click(position={"x": x, "y": y})
-            expect(page.locator("#finished li[data-request='1']")).to_have_attribute("data-state", "success")
-            answer = second.records("operator_answer")[0]
-            assert answer["source"] == "console"
-            u, v = answer["answer"]  # the pixel clicked (the image is shown scaled: within a pixel)
-            assert abs(u - x * w / box["width"]) <= 1 and abs(v - y * h / box["height"]) <= 1, (u, v)
-            expect(page.locator("#prompt-card")).to_be_hidden()
-            page.click('li[data-path="ask_point/click"] > .row')  # its output on the blackboard
-            expect(page.locator("#node-info")).to_contain_text(re.compile(rf"pixel\s*\[{u:g},{v:g}\]"))
-            shots(page, "prompt-answered")
-
-            # ---------------------------------------------------------------- bad request
-            page.fill("#field-item", "seven")
-            page.click("#submit")
-            expect(page.locator("#request-error")).to_have_text(
-                "POST /api/requests: request field 'item': expected int, got 'seven'")
-            expect(page.locator("#field-item")).to_have_class(re.compile(r"\binvalid\b"))
-            shots(page, "bad-request")
-            assert errors == []
-            browser.close()
+                # ---------------------------------------------------------------- bad request
+                page.fill("#field-item", "seven")
+                page.click("#submit")
+                expect(page.locator("#request-error")).to_have_text(
+                    "POST /api/requests: request field 'item': expected int, got 'seven'")
+                expect(page.locator("#field-item")).to_have_class(re.compile(r"\binvalid\b"))
+                shots(page, "bad-request")
+                assert errors == []
+                browser.close()
+            except BaseException:
+                _report_failure(page, shots, [first, second])
+                raise
     finally:
         gate.abort.set()
         for served in (first, second):

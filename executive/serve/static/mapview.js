@@ -17,14 +17,12 @@ export class MapView {
     this.readout = readout;
     this.grid = null;       // {width, height, resolution, origin, image: canvas}
     this.pose = null;       // {t, x, y, theta, v, w}
-    this.poses = [];        // recent poses, for the scan's pose at its time
     this.path = [];
     this.goal = null;       // {x, y, theta, label}
     this.scan = null;
     this.markers = [];
     this.people = [];
     this.radius = 0.18;     // footprint radius [m] (status.robot)
-    this.lidar = [0, 0, 0]; // mount in base_link [m, m, rad]
     this.zoom = 1;
     this.pan = [0, 0];
     this.dirty = true;
@@ -39,7 +37,6 @@ export class MapView {
   setRobot(robot) {
     if (!robot) return;
     if (typeof robot.footprint_radius === "number") this.radius = robot.footprint_radius;
-    if (Array.isArray(robot.lidar)) this.lidar = robot.lidar;
     this.dirty = true;
   }
 
@@ -65,8 +62,6 @@ export class MapView {
 
   setPose(p) {
     this.pose = p;
-    this.poses.push(p);
-    if (this.poses.length > 200) this.poses.shift();
     const deg = Math.round(p.theta * 180 / Math.PI) || 0;  // no "-0"
     this.readout.textContent = `x ${p.x.toFixed(2)} m  y ${p.y.toFixed(2)} m  θ ${deg}°  v ${p.v.toFixed(2)} m/s`;
     this.dirty = true;
@@ -79,7 +74,6 @@ export class MapView {
     this.scan = null;
     this.markers = [];
     this.people = [];
-    this.poses = [];
     this.dirty = true;
   }
 
@@ -88,13 +82,6 @@ export class MapView {
   setScan(scan) { this.scan = scan; this.dirty = true; }
   setMarkers(markers) { this.markers = markers || []; this.dirty = true; }
   setPeople(people) { this.people = people || []; this.dirty = true; }
-
-  // The pose nearest in clock time to t (the scan is drawn from where the robot was).
-  poseAt(t) {
-    let best = this.pose;
-    for (const p of this.poses) if (Math.abs(p.t - t) < Math.abs(best.t - t)) best = p;
-    return best;
-  }
 
   // map [m] -> canvas pixels
   transform() {
@@ -190,15 +177,34 @@ export class MapView {
     ctx.stroke();
     if (g.label) {
       ctx.font = "11px sans-serif";
-      ctx.fillText(g.label, x + 8, y + 14);
+      this.label(g.label, x, y + 14);
     }
+  }
+
+  // Text beside the point x, y: to its right, or to its left near the canvas's right edge.
+  // `taken`: boxes of labels drawn already; the label moves down a line until it is clear.
+  label(text, x, y, taken = []) {
+    const w = this.ctx.measureText(text).width, h = 12;
+    const lx = x + 8 + w > this.canvas.width - 2 ? x - 8 - w : x + 8;
+    let ly = y;
+    const clash = (b) => lx < b[0] + b[2] && b[0] < lx + w && ly - h < b[1] && b[1] - h < ly;
+    for (let i = 0; i < 6 && taken.some(clash); i++) ly += h;
+    taken.push([lx, ly, w]);
+    const ctx = this.ctx;
+    ctx.save();
+    ctx.strokeStyle = "rgba(255, 255, 255, 0.85)";  // a halo: legible over walls and free space
+    ctx.lineWidth = 3;
+    ctx.lineJoin = "round";
+    ctx.strokeText(text, lx, ly);
+    ctx.restore();
+    ctx.fillText(text, lx, ly);
   }
 
   drawScan(T) {
     const sc = this.scan;
-    if (!sc || !this.pose) return;
-    const p = sc.pose ? {x: sc.pose[0], y: sc.pose[1], theta: sc.pose[2]} : this.poseAt(sc.t);
-    const [lx, ly, lyaw] = this.lidar;
+    if (!sc || !sc.pose) return;
+    const p = {x: sc.pose[0], y: sc.pose[1], theta: sc.pose[2]};  // the base when the scan was sent
+    const [lx, ly, lyaw] = sc.lidar || [0, 0, 0];
     const c = Math.cos(p.theta), s = Math.sin(p.theta);
     const ox = p.x + c * lx - s * ly, oy = p.y + s * lx + c * ly;
     const ctx = this.ctx;
@@ -213,6 +219,7 @@ export class MapView {
   drawMarkers(T) {
     const ctx = this.ctx;
     ctx.font = "bold 11px sans-serif";
+    const taken = [];
     for (const m of this.markers) {
       const x = T.px(m.x), y = T.py(m.y);
       ctx.fillStyle = COLORS.marker;
@@ -223,7 +230,7 @@ export class MapView {
       ctx.moveTo(x, y);
       ctx.lineTo(x + 12 * Math.cos(m.yaw), y - 12 * Math.sin(m.yaw));
       ctx.stroke();
-      ctx.fillText(`#${m.id}`, x + 6, y - 6);
+      this.label(`#${m.id}`, x, y - 6, taken);
     }
   }
 

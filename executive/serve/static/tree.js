@@ -23,6 +23,7 @@ export class TreeView {
     this.selected = "";
     this.blackboard = {};
     this.snap = null;            // the last tree message
+    this.tip = "";               // the deepest running node, kept in view
     this.halted = new Set();     // nodes halted in this request (see nodeEvent)
   }
 
@@ -107,6 +108,16 @@ export class TreeView {
     for (const [path, item] of this.items) {
       item.row.classList.toggle("tip", path === tip);
       item.row.classList.toggle("selected", path === this.selected);
+    }
+    if (tip && tip !== this.tip) this.reveal(this.items.get(tip).row);
+    this.tip = tip;
+  }
+
+  // Scroll the tree (not the page) so that a row is in view: the running tip is followed.
+  reveal(row) {
+    const box = this.root, top = row.offsetTop;  // the tree list is the rows' offset parent
+    if (top < box.scrollTop || top + row.offsetHeight > box.scrollTop + box.clientHeight) {
+      box.scrollTop = top - box.clientHeight / 3;  // a third down: what runs next is in view too
     }
   }
 

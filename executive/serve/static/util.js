@@ -18,7 +18,7 @@ export function el(tag, attrs, ...children) {
 // A blackboard or event value as short text.
 export function fmtValue(v) {
   if (typeof v === "number") return Number.isInteger(v) ? String(v) : String(Math.round(v * 1e4) / 1e4);
-  if (typeof v === "string") return v;
+  if (typeof v === "string") return v === "" ? '""' : v;
   return JSON.stringify(v, (k, x) => (typeof x === "number" && !Number.isInteger(x) ? Math.round(x * 1e4) / 1e4 : x));
 }
 
