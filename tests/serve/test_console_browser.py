@@ -46,7 +46,8 @@ import pytest
 from mmexec.executive.config import build_robot
 from mmexec.executive.eventlog import read_log
 from mmexec.executive.runner import RunOptions
-from mmexec.executive.serve.server import serve
+from mmexec.executive.serve.app import create_app
+from mmexec.executive.serve.server import BindAddress, ServerThread, open_socket, serve
 
 ROOT = Path(__file__).resolve().parents[2]
 SIM = ROOT / "config" / "locobot_sim.yaml"
@@ -423,3 +424,48 @@ def test_console_in_chromium(tmp_path: Path, shots: Callable[[Any, str], Path]) 
                 served.runner.service.stop()
                 served.thread.join(PATIENCE)
     assert second is not None and second.join() == 0
+
+
+def test_console_asks_for_the_token_in_chromium(live: Any, shots: Callable[[Any, str], Path]) -> None:
+    """Off loopback every call needs the token: the page loads without it, asks for it
+    when the service refuses, and takes it from the URL's fragment (never sent)."""
+    chromium = _chromium()
+    from playwright.sync_api import expect, sync_playwright
+
+    token = "t0ken-" + "x" * 20
+    svc = live()  # the mock service; its app again, guarded, on a real loopback socket
+    sock = open_socket(BindAddress("127.0.0.1", 0))
+    server = ServerThread(create_app(svc.service, token=token), sock)
+    server.start()
+    url = f"http://127.0.0.1:{sock.getsockname()[1]}/console/"
+    try:
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            expect.set_options(timeout=PATIENCE * 1000)
+            page.goto(url)
+            expect(page.locator("#token-form")).to_be_visible()
+            expect(page.locator("#conn")).to_have_text("offline")
+            page.fill("#token-input", "wrong-" + "y" * 20)
+            page.click("#token-form button")
+            expect(page.locator("#token-why")).to_have_text("The service refused this token; enter its token")
+            expect(page.locator("#banner")).to_be_hidden()  # not "cannot be reached": it can, without the token
+            shots(page, "token-asked")
+            page.fill("#token-input", token)
+            page.click("#token-form button")
+            expect(page.locator("#conn")).to_have_text("live")
+            expect(page.locator("#mission-name")).to_have_text("quick")
+            expect(page.locator("#token-form")).to_be_hidden()
+
+            other = browser.new_page(viewport={"width": 1280, "height": 800})
+            other.goto(url + "#token=" + token)
+            expect(other.locator("#conn")).to_have_text("live")
+            expect(other.locator("#field-item")).to_be_visible()
+            assert "token" not in other.url  # taken out of the address bar (and history)
+            other.fill("#field-item", "4")
+            other.click("#submit")
+            expect(other.locator('#finished li[data-request="1"]')).to_have_attribute("data-state", "success")
+            browser.close()
+    finally:
+        server.stop()
+        sock.close()

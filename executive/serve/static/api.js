@@ -81,7 +81,9 @@ export class Stream {
     const query = token() ? `?token=${encodeURIComponent(token())}` : "";
     const ws = new WebSocket(`${scheme}://${location.host}/api/stream${query}`);
     this.ws = ws;
+    let opened = false;
     ws.onopen = () => {
+      opened = true;
       this.delay = 500;
       this.onState("up", "");
     };
@@ -96,7 +98,10 @@ export class Stream {
     };
     ws.onclose = (ev) => {
       if (this.ws !== ws) return;
+      // A refused handshake reaches a browser as a plain failure (1006), not as 4401: ask
+      // the API why (a 401 there brings up the token form).
       if (ev.code === 4401) refused();
+      else if (!opened) api("GET", "/api/status");
       const wait = this.delay;
       this.delay = Math.min(5000, this.delay * 2);
       this.onState("down", `reconnecting in ${(wait / 1000).toFixed(1)} s`);

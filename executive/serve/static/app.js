@@ -1,7 +1,7 @@
 // The operator console of `mmexec serve`: wires the API and the live stream to the views.
 // Shapes of every call and message: docs/console.md.
 
-import {api, onUnauthorised, setToken, Stream, takeTokenFromUrl} from "./api.js";
+import {api, onUnauthorised, setToken, Stream, takeTokenFromUrl, token} from "./api.js";
 import {CameraView, PromptView} from "./camera.js";
 import {LogView} from "./log.js";
 import {MapView} from "./mapview.js";
@@ -63,9 +63,11 @@ function showStatus(st) {
   }
 }
 
+let requestsCall = 0;
 async function refreshRequests() {
+  const mine = ++requestsCall;
   const r = await api("GET", "/api/requests");
-  if (r.ok) list.update(r.data);
+  if (r.ok && mine === requestsCall) list.update(r.data);  // an older answer arriving late is stale
 }
 
 async function refreshMission() {
@@ -144,7 +146,7 @@ const stream = new Stream((msg) => {
   conn.className = `conn ${state}`;
   if (state === "up") {
     if ($("banner").classList.contains("down")) banner("");
-  } else {
+  } else if (!needToken) {
     banner(`The service cannot be reached: ${detail}.`, "down");
   }
 });
@@ -188,13 +190,21 @@ $("shutdown").addEventListener("click", async () => {
 $("tree-expand").addEventListener("click", () => tree.expandAll());
 $("tree-collapse").addEventListener("click", () => tree.collapseIdle());
 
+// A call or the stream refused for want of the token: the form says so (not "cannot be reached").
+let needToken = false;
 onUnauthorised(() => {
+  needToken = true;
+  $("token-why").textContent = token() ? "The service refused this token; enter its token" :
+    "This service needs its token";
+  $("token-input").value = "";
   $("token-form").hidden = false;
   $("token-input").focus();
+  if ($("banner").classList.contains("down")) banner("");
 });
 $("token-form").addEventListener("submit", (ev) => {
   ev.preventDefault();
   setToken($("token-input").value);
+  needToken = false;
   $("token-form").hidden = true;
   stream.restart();
 });

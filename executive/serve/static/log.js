@@ -7,6 +7,7 @@ import {el, fmtValue} from "./util.js";
 const KEEP = 2000;   // records kept in the page
 const SHOW = 400;    // rows shown at most (the newest that match)
 const QUIET = new Set(["event", "seq", "t", "node", "nodes", "versions"]);
+const RENDER_EVERY = 200;  // [ms]
 
 // Why a record is a failure ("" when it is not one).
 export function failureOf(r) {
@@ -62,9 +63,9 @@ export class LogView {
     }
     this.records.push(record);
     if (this.records.length > KEEP) this.records.splice(0, this.records.length - KEEP);
-    if (!this.pending) {
+    if (!this.pending) {  // redrawn at most 5 times a second: a busy run writes hundreds of records a second
       this.pending = true;
-      requestAnimationFrame(() => { this.pending = false; this.render(); });
+      setTimeout(() => { this.pending = false; this.render(); }, RENDER_EVERY);
     }
   }
 
