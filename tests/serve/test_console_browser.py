@@ -64,7 +64,6 @@ STILL_JOINT_SPEED = 0.01
 #: Chromium flags that work on a closed network, as root, without a display
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                  "--disable-background-networking", "--disable-component-update", "--disable-sync"]
-INSTALL = "run `make browser` (apt-get install chromium chromium-driver; pip install playwright)"
 
 
 def _chromium() -> str:
@@ -74,11 +73,11 @@ def _chromium() -> str:
     try:
         import playwright.sync_api  # noqa: F401
     except ImportError:
-        problem = "Playwright is not installed"
+        problem = "Playwright is not installed: `make install` (pip install -e '.[dev]')"
     if not problem and not path:
-        problem = "Debian's chromium is not installed"
+        problem = "Debian's chromium is not installed: `make browser` (as root: apt-get install chromium chromium-driver)"
     if problem:
-        message = f"browser test: {problem}; {INSTALL}"
+        message = f"browser test: {problem}"
         if os.environ.get("CI") == "true":
             pytest.fail(message + " (CI=true: the browser must be installable here)")
         pytest.skip(message)
