@@ -13,6 +13,7 @@ import pytest
 
 from mmexec.config.brokenpipe import EXIT_BROKEN_PIPE
 from mmexec.sim import mapgen
+from mmexec.sim.world import shipped_worlds
 
 MAPGEN = [sys.executable, "-m", "mmexec.sim.mapgen"]
 
@@ -33,7 +34,8 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path) -> None:
     (tmp_path / "plain.txt").write_text("")
     (tmp_path / "folder.yaml").mkdir()
     cases = {
-        ("nosuch",): "mapgen WORLD: unknown world 'nosuch' (shipped: lab; or give a path to a .yaml file)",
+        ("nosuch",): f"mapgen WORLD: unknown world 'nosuch' (shipped: {', '.join(shipped_worlds())}; "
+                     "or give a path to a .yaml file)",
         ("worlds/missing.yaml",): "worlds/missing.yaml:1:1: no such file",
         (str(tmp_path),): f"{tmp_path}:1:1: is a directory, expected a YAML file",
         ("lab", "map.txt"): f"{mapgen.PROG}: OUT 'map.txt': expected a .yaml file path (the .pgm is written beside it)",
