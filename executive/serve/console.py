@@ -9,7 +9,7 @@
   writes, by node path (the paths of the ``tree`` stream);
 * stream payloads built in the tick thread: the running tree's blackboard
   (:func:`blackboard_json`), the world model's markers (:func:`markers_json`), tracked
-  people (:func:`people_json`) and marker detections on a camera frame
+  people (:func:`people_json`) and the marker detections sent with each camera frame
   (:class:`StreamDetector`).
 
 Shapes: docs/console.md.
@@ -206,8 +206,6 @@ class ConsoleWorld:
       :data:`BLACKBOARD_HZ` (wall), and its final values at ``request_end`` (sticky);
     * ``markers``: the world model's marker estimates when they changed (sticky);
     * ``people``: ``world[WORLD_PEOPLE]`` when the navigation stack replaced it (sticky);
-    * ``detections``: markers found on the camera frames the console is sent, with the
-      frame's time (the console draws them on the image of that time);
 
     and keeps every event record for ``GET /api/events`` and the robot's facts (name,
     footprint radius) in the status. :meth:`watch` wraps the mission so that each tree
@@ -221,7 +219,6 @@ class ConsoleWorld:
         self._bb_due = 0.0
         self._markers_seen: Any = None
         self._people: Any = None
-        self._camera_due = 0.0
         self._detector = StreamDetector()
 
     def watch(self, mission: Any) -> Any:
@@ -249,25 +246,17 @@ class ConsoleWorld:
         return False
 
     def wants(self, topic: str, t: float) -> bool:
-        if topic == "event":
-            return True
-        if topic == "camera" and self.service.hub.wants("detections"):
-            now = time.monotonic()  # the console sink's rate: both are sent the same frames
-            if now >= self._camera_due:
-                self._camera_due = now + 1.0 / self.service.settings.camera_hz
-                return True
-        return False
+        return topic == "event"  # kept for GET /api/events; the blackboard's final values at request_end
 
     def send(self, topic: str, data: Any, t: float) -> None:
         if topic == "event":
             self.service.keep_event(data)
             if data.get("event") == "request_end":
                 self._publish_blackboard(t, force=True)
-        elif topic == "camera":
-            frame = data.frame
-            h, w = frame.rgb.shape[:2]
-            self.service.hub.publish("detections", {"t": frame.stamp, "width": int(w), "height": int(h),
-                                                    "detections": self._detector.detect(self.world, frame.rgb)})
+
+    def detections(self, rgb: np.ndarray) -> list[dict[str, Any]]:
+        """The markers on a camera image the console is sent (see :class:`StreamDetector`)."""
+        return self._detector.detect(self.world, rgb)
 
     def _on_tree(self, tree: Any) -> None:
         self._tree = tree

@@ -70,7 +70,7 @@ log = logging.getLogger(__name__)
 
 #: Stream topics a WebSocket client may subscribe to.
 TOPICS = ("status", "tree", "event", "pose", "path", "map", "scan", "camera", "prompt", "blackboard", "markers",
-          "people", "detections")
+          "people")
 #: ``ctx.world`` key where a navigation skill may publish its current path: a list of
 #: [x, y] points in ``map`` [m]; streamed as ``path`` whenever it is replaced.
 WORLD_PATH = "nav.path"
@@ -84,7 +84,7 @@ IDLE_WAIT = 0.1
 STREAM_JPEG_QUALITY = 70
 #: [wall Hz] how often the status is streamed while nothing else changes it
 STATUS_HZ = 2.0
-_STICKY = ("status", "map", "pose", "path", "blackboard", "markers", "people", "camera", "detections")
+_STICKY = ("status", "map", "pose", "path", "blackboard", "markers", "people", "camera")
 
 
 class ServiceError(Exception):
@@ -694,8 +694,9 @@ class ConsoleSink:
     pose, scan and camera at the ``serve:`` section's wall-clock rates, the status twice a
     second; a client that joined gets the whole tree at the next tick."""
 
-    def __init__(self, service: Service) -> None:
+    def __init__(self, service: Service, detect: Callable[[Any], list[dict[str, Any]]] | None = None) -> None:
         self.service = service
+        self.detect = detect  # markers on a camera frame's RGB image, sent with it (ConsoleWorld.detections)
         self._joined = 0  # stream clients seen so far
         self._due: dict[str, float] = {}
         self._pose: Any = None  # the base pose of this tick, sent with a scan (the console draws it from there)
@@ -727,6 +728,8 @@ class ConsoleSink:
             m = data.T_base_lidar  # the lidar's mount in base_link, planar: [x, y, yaw]
             message["lidar"] = [float(m[0][3]), float(m[1][3]), math.atan2(float(m[1][0]), float(m[0][0]))]
             message["pose"] = None if self._pose is None else [self._pose.x, self._pose.y, self._pose.theta]
+        elif topic == "camera" and self.detect is not None:
+            message["detections"] = self.detect(data.frame.rgb)
         self.service.hub.publish(topic, message)
 
     def _is_due(self, topic: str, hz: float) -> bool:
@@ -750,9 +753,9 @@ class ServeRunner(Runner):
         self.world[OPERATOR_KEY] = service.prompts
         #: the live streams: to the console, and to Foxglove / MCAP sinks added before run()
         self.streams = Streams(self.world)
-        self.streams.add_sink(ConsoleSink(service))
-        #: the browser console's own streams (blackboard, markers, people, detections)
+        #: the browser console's own streams (blackboard, markers, people) and marker detections
         self.console = ConsoleWorld(service, self.world)
+        self.streams.add_sink(ConsoleSink(service, detect=self.console.detections))
         self.streams.add_sink(self.console)
         self._period = 0.05
         self._request_id = 0  # the service id of the request being served

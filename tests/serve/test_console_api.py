@@ -1,7 +1,8 @@
 """What the browser console needs from the service, without a browser: its static files
 (types, headers, nothing else reachable, no token needed for them alone), the mission's
 request fields and node descriptions, the event-log tail, and the console's own streams
-(blackboard, markers, people, detections, the robot's facts in the status)."""
+(blackboard, markers, people, marker detections on the camera frames, the scan's pose and
+mount, the robot's facts in the status)."""
 
 from __future__ import annotations
 
@@ -249,29 +250,34 @@ def test_a_scan_comes_with_the_base_pose_and_the_lidar_mount(live: Any) -> None:
     assert len(scan["pose"]) == 3 and all(math.isfinite(v) for v in scan["pose"])
 
 
-def test_detections_come_with_the_camera_frame_they_belong_to(live: Any) -> None:
+def test_a_camera_frame_comes_with_its_detections(live: Any) -> None:
     svc = live("ask_point")
     c = svc.client
     world = svc.runner.world
-    svc.runner.add_tick_hook(lambda robot, period: world.setdefault(WORLD_DETECTOR, MarkerDetector(DetectorConfig())))
-    with c.websocket_connect("/api/stream?topics=camera,detections,prompt") as ws:
+    svc.runner.add_tick_hook(lambda robot, period: world.setdefault(  # as a detection skill would
+        WORLD_DETECTOR, MarkerDetector(DetectorConfig(downscale=1))))
+    with c.websocket_connect("/api/stream?topics=camera,prompt") as ws:
         assert ws.receive_json()["type"] == "hello"
         c.post("/api/requests", json={"item": 1})
-        got = _messages(ws, lambda m: m["type"] == "detections")
-        frames = [m["data"] for m in got if m["type"] == "camera"]
-        det = got[-1]["data"]
+        cam = _messages(ws, lambda m: m["type"] == "camera")[-1]["data"]
         prompt = svc.prompt()
         c.post(f"/api/prompts/{prompt['id']}/answer", json={"answer": [1, 1]})
-    assert frames and det["t"] == frames[-1]["t"] and det["detections"] == []  # the mock's image has no marker
-    assert (det["width"], det["height"]) == (frames[-1]["width"], frames[-1]["height"])
+    assert cam["detections"] == []  # the mock's image shows no marker
+    found = svc.runner.console.detections(_tag_image(4))  # the same detector on one that does
+    assert [d["id"] for d in found] == [4]
+
+
+def _tag_image(marker: int) -> np.ndarray:
+    """A 320x240 RGB image with ``marker`` (DICT_4X4_50, 80 px) at x 100..180, y 60..140."""
+    img = np.full((240, 320), 255, np.uint8)
+    img[60:140, 100:180] = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50),
+                                                         marker, 80)
+    return np.dstack([img] * 3)
 
 
 def test_stream_detector_finds_a_marker_with_its_corners() -> None:
     cfg = DetectorConfig()
-    img = np.full((240, 320), 255, np.uint8)
-    tag = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), 4, 80)
-    img[60:140, 100:180] = tag
-    rgb = np.dstack([img] * 3)
+    rgb = _tag_image(4)
     assert StreamDetector().detect({}, rgb) == []  # no skill made a detector yet: nothing to match
     found = StreamDetector().detect({WORLD_DETECTOR: MarkerDetector(cfg)}, rgb)
     assert [d["id"] for d in found] == [4] and found[0]["label"] == "marker 4"
@@ -292,6 +298,6 @@ def test_people_and_blackboard_payloads() -> None:
 def test_unknown_topic_names_the_console_topics(live: Any) -> None:
     with live().client.websocket_connect("/api/stream?topics=blackbored") as ws:
         msg = ws.receive_json()
-        assert "blackboard, markers, people, detections" in msg["data"]["error"]
+        assert "prompt, blackboard, markers, people)" in msg["data"]["error"]
         with pytest.raises(WebSocketDisconnect):
             ws.receive_json()

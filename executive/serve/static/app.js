@@ -131,7 +131,6 @@ const handlers = {
   markers: (data) => map.setMarkers(data.markers),
   people: (data) => map.setPeople(data.people),
   camera: (data) => camera.setFrame(data),
-  detections: (data) => camera.setDetections(data),
   prompt: (data) => prompts.message(data),
   blackboard: (data) => tree.setBlackboard(data.values),
   error: (data) => banner(data.error, "error"),

@@ -35,8 +35,7 @@ export class CameraView {
     this.canvas = canvas;
     this.ctx = canvas.getContext("2d");
     this.info = info;
-    this.frame = null;        // {t, width, height, img}
-    this.detections = null;   // {t, detections}
+    this.frame = null;        // {t, width, height, img, detections}
     this.placeholder();
   }
 
@@ -51,7 +50,6 @@ export class CameraView {
 
   reset() {
     this.frame = null;
-    this.detections = null;
     this.canvas.width = 520;
     this.canvas.height = 390;
     this.info.textContent = "";
@@ -61,15 +59,10 @@ export class CameraView {
   setFrame(msg) {
     const img = new Image();
     img.onload = () => {
-      this.frame = {t: msg.t, width: msg.width, height: msg.height, img};
+      this.frame = {t: msg.t, width: msg.width, height: msg.height, img, detections: msg.detections || []};
       this.draw();
     };
     img.src = `data:image/jpeg;base64,${msg.jpeg}`;
-  }
-
-  setDetections(msg) {
-    this.detections = msg;
-    this.draw();
   }
 
   draw() {
@@ -81,8 +74,7 @@ export class CameraView {
       c.height = f.height;
     }
     this.ctx.drawImage(f.img, 0, 0);
-    const d = this.detections;
-    const shown = d && d.t === f.t ? d.detections : [];  // only the detections of this frame
+    const shown = f.detections;  // the markers found on this very frame
     for (const det of shown) drawShape(this.ctx, {shape: "polygon", points: det.points, label: det.label,
                                                    color: "#00e676"}, 1, 1);
     this.info.textContent = `${f.width}×${f.height}, t ${fmtTime(f.t)}, ${shown.length} detection${shown.length === 1 ? "" : "s"}`;
