@@ -47,12 +47,12 @@ from typing import Any
 
 import numpy as np
 
+from mmexec.drivers.geometry import wrap_angle as wrap
 from mmexec.drivers.interfaces import LaserScan, Pose2D
 from mmexec.drivers.maps import load_map, write_map
 from mmexec.sim.backend import SimRobot, build
 from mmexec.sim.world import load_world
 from mmexec.skills.localization import AmclConfig, ParticleFilter, ReflectorMap, load_reflectors
-from mmexec.skills.localization.motion import wrap
 from mmexec.skills.navigation.astar import plan_path, simplify_path
 from mmexec.skills.navigation.grid import CostMap, inflate
 from mmexec.skills.navigation.tracker import PathTracker, TrackerConfig

@@ -52,14 +52,11 @@ from statistics import NormalDist
 
 import numpy as np
 
+from mmexec.drivers.geometry import se2_matrix
+from mmexec.drivers.geometry import wrap_angle as wrap
 from mmexec.drivers.interfaces import OccupancyGrid
 from mmexec.skills.localization.likelihood import BeamModel, LikelihoodField
-from mmexec.skills.localization.motion import (
-    OdometryNoise,
-    odometry_step,
-    sample_odometry_motion,
-    wrap,
-)
+from mmexec.skills.localization.motion import OdometryNoise, odometry_step, sample_odometry_motion
 from mmexec.skills.localization.reflectors import (
     ReflectorConfig,
     ReflectorFix,
@@ -342,15 +339,10 @@ class ParticleFilter:
         if self._odom is None:
             return np.eye(3)
         est = self.estimate().pose
-        return _se2(est) @ np.linalg.inv(_se2(self._odom))
+        return se2_matrix(*map(float, est)) @ np.linalg.inv(se2_matrix(*map(float, self._odom)))
 
 
 def _normalised(w: np.ndarray) -> np.ndarray:
     """``w`` scaled to sum 1 (all zeros when it sums to 0: that term then carries nothing)."""
     total = float(w.sum())
     return w / total if total > 0 else np.zeros_like(w)
-
-
-def _se2(p: np.ndarray) -> np.ndarray:
-    c, s = math.cos(float(p[2])), math.sin(float(p[2]))
-    return np.array([[c, -s, float(p[0])], [s, c, float(p[1])], [0.0, 0.0, 1.0]])

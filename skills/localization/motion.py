@@ -27,12 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["OdometryNoise", "odometry_step", "sample_odometry_motion", "wrap"]
+from mmexec.drivers.geometry import wrap_angle as wrap
 
-
-def wrap(a: np.ndarray | float) -> np.ndarray:
-    """Angles wrapped into [-pi, pi) [rad], elementwise."""
-    return (np.asarray(a, dtype=np.float64) + math.pi) % (2.0 * math.pi) - math.pi
+__all__ = ["OdometryNoise", "odometry_step", "sample_odometry_motion"]
 
 
 @dataclass(frozen=True)

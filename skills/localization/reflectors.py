@@ -56,7 +56,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mmexec.skills.localization.motion import wrap
+from mmexec.drivers.geometry import rigid_fit
+from mmexec.drivers.geometry import wrap_angle as wrap
 
 __all__ = [
     "Detection",
@@ -251,18 +252,6 @@ class TriangleLibrary:
         ]
 
 
-def _rigid_fit(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rotation ``R`` (2x2) and translation ``t`` minimising ``|R src + t - dst|`` (Kabsch)."""
-    cs, cd = src.mean(axis=0), dst.mean(axis=0)
-    h = (src - cs).T @ (dst - cd)
-    u, _, vt = np.linalg.svd(h)
-    r = vt.T @ u.T
-    if np.linalg.det(r) < 0:
-        vt[1] *= -1
-        r = vt.T @ u.T
-    return r, cd - r @ cs
-
-
 def match_reflectors(
     detections: list[Detection], library: TriangleLibrary, cfg: ReflectorConfig
 ) -> dict[int, int]:
@@ -283,7 +272,7 @@ def match_reflectors(
             if key in tried:
                 continue
             tried.add(key)
-            r, t = _rigid_fit(obs[[a, b, c]], refl[[ma, mb, mc]])
+            r, t = rigid_fit(obs[[a, b, c]], refl[[ma, mb, mc]])
             moved = obs @ r.T + t
             dist = np.hypot(moved[:, None, 0] - refl[None, :, 0], moved[:, None, 1] - refl[None, :, 1])
             nearest = dist.argmin(axis=1)

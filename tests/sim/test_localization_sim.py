@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from mmexec.config.yamlload import InputError
+from mmexec.drivers.geometry import wrap_angle as wrap
 from mmexec.drivers.interfaces import LaserScan, Pose2D
 from mmexec.drivers.maps import load_map, write_map
 from mmexec.sim import mapgen
@@ -20,7 +21,6 @@ from mmexec.sim.backend import SimRobot, build, parse_section
 from mmexec.sim.capabilities import ODOMETRY_PROFILES
 from mmexec.sim.world import load_world
 from mmexec.skills.localization import AmclConfig, ParticleFilter, ReflectorConfig, load_reflectors
-from mmexec.skills.localization.motion import wrap
 from mmexec.skills.localization.reflectors import extract_reflectors
 from mmexec.skills.navigation.astar import plan_path, simplify_path
 from mmexec.skills.navigation.grid import CostMap, inflate

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from locroom import POST_R, POSTS, Lidar, grid
 
+from mmexec.drivers.geometry import wrap_angle as wrap
 from mmexec.skills.localization import (
     AmclConfig,
     BeamModel,
@@ -16,7 +17,6 @@ from mmexec.skills.localization import (
     ReflectorConfig,
 )
 from mmexec.skills.localization.amcl import kld_sample_count
-from mmexec.skills.localization.motion import wrap
 
 GOALS = [(4.5, 1.0), (4.5, 3.0), (1.0, 3.0), (1.0, 1.0)]
 
