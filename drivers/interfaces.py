@@ -10,7 +10,7 @@ Units are SI (m, rad, s, N) and frames follow REP-103 (x forward, y left, z up):
 * ``arm_base``: the arm's mounting frame (``arm_base_link`` on the LoCoBot, ``base_link``
   of the UR); its pose in ``base_link`` is :attr:`Arm.mount`.
 * camera optical frame: z forward, x right, y down; its pose in ``base_link`` is
-  :meth:`Camera.pose_in_base`.
+  :meth:`Camera.pose_in_base` (on a pan/tilt :class:`Head`, at the head's measured joints).
 
 Transforms are 4x4 homogeneous ``numpy`` arrays named ``T_<to>_<from>``: a point in
 ``from`` coordinates, multiplied on the left by ``T_to_from``, lands in ``to``.
@@ -49,6 +49,8 @@ __all__ = [
     "GraspState",
     "Gripper",
     "GripperState",
+    "Head",
+    "HeadState",
     "JointLimit",
     "JointState",
     "JointTrajectory",
@@ -392,6 +394,21 @@ class CameraIntrinsics:
     fy: float
     cx: float
     cy: float
+@dataclass(frozen=True)
+class HeadState:
+    """Pan/tilt head state at ``stamp`` [s, clock time], measured: ``pan`` [rad] about the
+    head's vertical axis (positive turns the camera left, CCW seen from above), ``tilt``
+    [rad] about its horizontal axis (positive looks down), their velocities [rad/s], and
+    ``fault`` ("" when none: e.g. a servo's hardware error, the link lost)."""
+
+    pan: float
+    tilt: float
+    stamp: float
+    pan_velocity: float = 0.0
+    tilt_velocity: float = 0.0
+    fault: str = ""
+
+
     dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
     def matrix(self) -> np.ndarray:
@@ -622,6 +639,72 @@ class Robot(abc.ABC):
     name: str = "robot"
     description: RobotDescription | None = None
     clock: Clock
+class Head(abc.ABC):
+    """A pan/tilt head carrying the camera (the LoCoBot's; None on a robot without one).
+
+    :meth:`point` starts a move of both joints as a :class:`Goal` (polled each tick,
+    cancelled on demand, never waited on); the backend enforces the joint limits itself: a
+    target outside them gives a FAILED goal naming the joint, and nothing moves. The goal
+    succeeds when both measured joints are within :attr:`tolerance` of the target; cancel
+    holds the head where it is. :attr:`home` is the robot's default head pose (from its
+    config or description), which skills that move the head return to. The camera's
+    :meth:`Camera.pose_in_base` follows the head's measured joints, and every frame carries
+    the pose at its capture. :attr:`kinematics` (the description's head chain, None when
+    unknown) turns a point into the pan and tilt that look at it (:meth:`look_at`).
+    """
+
+    tolerance: float = 0.02  # rad
+
+    @property
+    @abc.abstractmethod
+    def joint_names(self) -> tuple[str, str]:
+        """The (pan, tilt) joint names of the robot description."""
+
+    @property
+    @abc.abstractmethod
+    def limits(self) -> tuple[JointLimit, JointLimit]:
+        """Pan and tilt limits (position [rad], velocity [rad/s]) from the description."""
+
+    @property
+    def home(self) -> tuple[float, float]:
+        """The default head pose (pan, tilt) [rad]."""
+        return (0.0, 0.0)
+
+    @property
+    def kinematics(self) -> Any:
+        """The head's chain (:class:`mmexec.drivers.descriptions.head.HeadModel`), or None."""
+        return None
+
+    @abc.abstractmethod
+    def state(self) -> HeadState:
+        """Latest measured pan/tilt. Never blocks."""
+
+    @abc.abstractmethod
+    def point(self, pan: float, tilt: float) -> Goal:
+        """Start moving to ``pan``, ``tilt`` [rad] at the joints' velocity limit."""
+
+    def look_at(self, point_in_base: Sequence[float]) -> Goal:
+        """Start pointing the camera's optical axis at ``point_in_base`` (x, y, z [m] in
+        ``base_link``); a FAILED goal when the head cannot (no kinematics, out of reach)."""
+        model = self.kinematics
+        if model is None:
+            return Goal.failed("head.look_at", "this head has no kinematic model to aim with")
+        pan, tilt = model.aim(point_in_base)
+        return self.point(pan, tilt)
+
+    def limit_problem(self, pan: float, tilt: float) -> str:
+        """Empty when ``pan``, ``tilt`` [rad] are within :attr:`limits`, else one line naming
+        the joint (for the backends' checks)."""
+        for lim, q in zip(self.limits, (pan, tilt)):
+            if not math.isfinite(q) or not lim.contains(q):
+                return (f"{lim.name} = {q:.4f} rad outside its limits [{lim.lower:.4f}, {lim.upper:.4f}] rad; "
+                        "nothing was sent")
+        return ""
+
+    def stop(self) -> None:
+        """Cancel any move and hold where the head is."""
+
+
     base: Base | None = None
     arm: Arm | None = None
     gripper: Gripper | None = None
@@ -640,9 +723,9 @@ class Robot(abc.ABC):
         advances its manual clock. Called by the runner between ticks, never by skills."""
 
     def safe_stop(self) -> None:
-        """Stop every motion now and leave the robot safe (base stopped, arm holding,
-        gripper unchanged). Must not raise."""
-        for cap in (self.base, self.arm):
+        """Stop every motion now and leave the robot safe (base stopped, arm and head
+        holding, gripper unchanged). Must not raise."""
+        for cap in (self.base, self.arm, self.head):
             if cap is None:
                 continue
             try:
@@ -650,6 +733,8 @@ class Robot(abc.ABC):
             except Exception:
                 import logging
 
+    #: the camera's pan/tilt head (the LoCoBot's); None on a robot without one
+    head: Head | None = None
                 logging.getLogger(__name__).exception("safe_stop: %s.stop() failed", cap)
 
     def close(self) -> None:

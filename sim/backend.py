@@ -41,6 +41,7 @@ import pybullet as p
 from mmexec.config.yamlload import Mark, Problems, YDict, bind, did_you_mean
 from mmexec.drivers import descriptions
 from mmexec.drivers.backendspec import CAPABILITIES, BackendSpec, NavMap, SectionFile
+from mmexec.drivers.descriptions.head import HeadModel
 from mmexec.drivers.interfaces import (
     CameraIntrinsics,
     CapabilityError,
@@ -59,6 +60,7 @@ from mmexec.sim.capabilities import (
     SimCore,
     SimGripper,
     SimLidar,
+    SimHead,
 )
 from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultConfig, FaultInjector, world_extras
@@ -313,12 +315,15 @@ class SimRobot(Robot):
             mount[:3, 3] = (x, y, z)
         self.camera = SimCamera(core, intr, cfg.camera.near, cfg.camera.far, cfg.camera.noise, self.base, mount)
         if info.pan_tilt_joints:
-            self.camera.set_pan_tilt(cfg.camera.pan, cfg.camera.tilt)
+            # the head starts (and its home is) at sim.camera.pan/tilt
+            self.head = SimHead(core, (cfg.camera.pan, cfg.camera.tilt), HeadModel.of(self.description))
+            self.head.teleport(cfg.camera.pan, cfg.camera.tilt)
         lid = cfg.lidar
         self.lidar = SimLidar(core, lid.beams, lid.range_min, lid.range_max, lid.noise,
                               reflectors=frozenset(r.name for r in world.spec.reflectors),
                               noise_fraction=lid.noise_fraction, quality=lid.quality)
         self.truth = SimTruth(self)  #: SIM-ONLY ground truth (tests, campaign scoring)
+        self.head: SimHead | None = None
         core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
         self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}
         self.physics_steps = 0  #: substeps that ran stepSimulation (the others were at rest)
@@ -334,7 +339,7 @@ class SimRobot(Robot):
         it can cover in ``period`` (5 cm margin). The kinematic base and the clock advance
         either way. The decision depends only on the simulation state, so a seed still
         reproduces a run."""
-        if not (self.arm.at_rest() and self.gripper.at_rest()):
+        if not (self.arm.at_rest() and self.gripper.at_rest()) or (self.head is not None and not self.head.at_rest()):
             return False
         cid = self.cid
         items = self.scene_handles.items
@@ -386,6 +391,8 @@ class SimRobot(Robot):
                 core.sync()
                 tp = core.true_pose
                 self.recorder.sample(self.clock.now(), (tp.x, tp.y), tp.theta)
+                if self.head is not None:
+                    self.head.update(dt)
         if self.truth_log is not None:
             self.truth_log.sample()
 

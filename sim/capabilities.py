@@ -1,4 +1,4 @@
-"""Capability implementations on pybullet: Base, Arm, Gripper, Camera, Lidar, Clock.
+"""Capability implementations on pybullet: Base, Arm, Gripper, Head, Camera, Lidar, Clock.
 
 All of them share one :class:`SimCore` (client id, robot body, link/joint indices, the
 sim clock, the seeded generator, the fault injector). Nothing here steps physics by
@@ -40,6 +40,8 @@ from mmexec.drivers.interfaces import (
     GraspState,
     Gripper,
     GripperState,
+    Head,
+    HeadState,
     JointLimit,
     JointState,
     JointTrajectory,
@@ -53,7 +55,7 @@ from mmexec.sim.models import ModelInfo
 from mmexec.sim.people import SimPeople
 from mmexec.sim.scene import SceneHandles
 
-__all__ = ["Contact", "SimArm", "SimBase", "SimCamera", "SimClock", "SimCore", "SimGripper", "SimLidar"]
+__all__ = ["Contact", "SimArm", "SimBase", "SimCamera", "SimClock", "SimCore", "SimGripper", "SimHead", "SimLidar"]
 
 log = logging.getLogger(__name__)
 
@@ -724,6 +726,140 @@ class SimGripper(Gripper):
             self._release(GraspState.DROPPED)
 
 
+# --------------------------------------------------------------------------- head
+
+
+def _teleport_head(core: SimCore, pan: float, tilt: float) -> tuple[float, float]:
+    """Put the pan/tilt joints at ``pan``, ``tilt`` [rad] (clipped to their limits) and
+    hold them there with their motors; returns the clipped pose."""
+    out = []
+    for name, v in zip(core.info.pan_tilt_joints, (pan, tilt)):
+        j = core.joints[name]
+        lo, hi = p.getJointInfo(core.body, j, physicsClientId=core.cid)[8:10]
+        q = min(hi, max(lo, v))
+        p.resetJointState(core.body, j, q, physicsClientId=core.cid)
+        p.setJointMotorControl2(core.body, j, p.POSITION_CONTROL, targetPosition=q, force=2.0,
+                                physicsClientId=core.cid)
+        out.append(q)
+    return out[0], out[1]
+
+
+class SimHead(Head):
+    """The pan/tilt head on the model's ``pan_tilt_joints``: position-controlled motors
+    (force: the joints' effort limit) whose set-points ramp towards the target at the
+    joints' velocity limit every substep, as a servo's velocity profile does. Targets
+    outside the URDF limits fail at once (nothing moves); the goal succeeds once the
+    set-point is at the target and both measured joints are within :attr:`tolerance`
+    and slower than :attr:`settled_speed`, and fails ``settle_time`` [s] after the ramp's end if they are not (blocked). Cancel
+    holds the measured pose at once (the head is light). Idle, the head is not commanded
+    at all: the motors keep the last target (the start pose of ``sim.camera.pan/tilt``)."""
+
+    settle_time = 1.0
+    settled_speed = 0.05  #: rad/s: both joints slower than this count as arrived
+
+    def __init__(self, core: SimCore, home: tuple[float, float], kinematics: object | None = None) -> None:
+        self._c = core
+        names = core.info.pan_tilt_joints
+        self._names: tuple[str, str] = (names[0], names[1])
+        self._idx = [core.joints[n] for n in names]
+        lims = []
+        for n, i in zip(names, self._idx):
+            ji = p.getJointInfo(core.body, i, physicsClientId=core.cid)
+            lims.append(JointLimit(n, ji[8], ji[9], ji[11], effort=ji[10]))
+        self._limits: tuple[JointLimit, JointLimit] = (lims[0], lims[1])
+        self._home = home
+        self._kinematics = kinematics
+        self._goal: Goal | None = None
+        self._target = np.zeros(2)
+        self._cmd = np.zeros(2)
+        self._deadline = 0.0
+        self.moves = 0  #: point() goals started (tests)
+
+    @property
+    def joint_names(self) -> tuple[str, str]:
+        return self._names
+
+    @property
+    def limits(self) -> tuple[JointLimit, JointLimit]:
+        return self._limits
+
+    @property
+    def home(self) -> tuple[float, float]:
+        return self._home
+
+    @property
+    def kinematics(self) -> object | None:
+        return self._kinematics
+
+    def _q(self) -> tuple[np.ndarray, np.ndarray]:
+        st = p.getJointStates(self._c.body, self._idx, physicsClientId=self._c.cid)
+        return np.array([s[0] for s in st]), np.array([s[1] for s in st])
+
+    def state(self) -> HeadState:
+        q, dq = self._q()
+        return HeadState(float(q[0]), float(q[1]), self._c.clock.now(), float(dq[0]), float(dq[1]))
+
+    def teleport(self, pan: float, tilt: float) -> None:
+        """Sim-only: put the head at ``pan``, ``tilt`` [rad] at once (clipped), holding."""
+        if self._goal is not None and not self._goal.done():
+            self._goal.mark_cancelled("head teleported")
+        self._goal = None
+        self._target = self._cmd = np.array(_teleport_head(self._c, pan, tilt))
+
+    def point(self, pan: float, tilt: float) -> Goal:
+        problem = self.limit_problem(pan, tilt)
+        if problem:
+            return Goal.failed("head.point", problem)
+        if self._goal is not None and not self._goal.done():
+            self._goal.mark_cancelled("preempted by a new head goal")
+        q, _ = self._q()
+        target = np.array([float(pan), float(tilt)])
+        ramp = max(float(abs(t - a)) / lim.velocity for t, a, lim in zip(target, q, self._limits))
+        self.moves += 1
+        self._goal = Goal("head.point", on_cancel=self._on_cancel)
+        self._target, self._cmd = target, q
+        self._deadline = self._c.clock.now() + ramp + self.settle_time
+        return self._goal
+
+    def _command(self, q: np.ndarray) -> None:
+        c = self._c
+        p.setJointMotorControlArray(c.body, self._idx, p.POSITION_CONTROL, targetPositions=q.tolist(),
+                                    forces=[lim.effort for lim in self._limits], physicsClientId=c.cid)
+
+    def _on_cancel(self, goal: Goal) -> None:
+        q, _ = self._q()
+        self._target = self._cmd = q
+        self._command(q)
+        goal.mark_cancelled("cancelled: head holding")
+
+    def stop(self) -> None:
+        if self._goal is not None and not self._goal.done():
+            self._goal.cancel()
+
+    def at_rest(self) -> bool:
+        """True when no head goal is running (the motors hold their last target)."""
+        return self._goal is None or self._goal.done()
+
+    def update(self, dt: float) -> None:
+        goal = self._goal
+        if goal is None or goal.done():
+            return
+        step = np.array([lim.velocity * dt for lim in self._limits])
+        self._cmd = self._cmd + np.clip(self._target - self._cmd, -step, step)
+        self._command(self._cmd)
+        q, dq = self._q()
+        err = np.abs(q - self._target)
+        settled = float(np.abs(dq).max()) < self.settled_speed
+        if np.array_equal(self._cmd, self._target) and float(err.max()) <= self.tolerance and settled:
+            goal.succeed(self.state())
+        elif self._c.clock.now() + dt > self._deadline:
+            j = int(np.argmax(err))
+            self._target = self._cmd = q
+            self._command(q)
+            goal.fail(f"head joint {self._names[j]}: {err[j]:.3f} rad short of the target {self.settle_time:g} s "
+                      "after the move should have ended (blocked?)")
+
+
 # --------------------------------------------------------------------------- sensors
 
 
@@ -763,12 +899,7 @@ class SimCamera(Camera):
 
     def set_pan_tilt(self, pan: float, tilt: float) -> None:
         """Sim-only (LoCoBot): point the pan/tilt head [rad] (teleported, within limits)."""
-        for name, v in zip(self._c.info.pan_tilt_joints, (pan, tilt)):
-            j = self._c.joints[name]
-            lo, hi = p.getJointInfo(self._c.body, j, physicsClientId=self._c.cid)[8:10]
-            p.resetJointState(self._c.body, j, min(hi, max(lo, v)), physicsClientId=self._c.cid)
-            p.setJointMotorControl2(self._c.body, j, p.POSITION_CONTROL, targetPosition=min(hi, max(lo, v)),
-                                    force=2.0, physicsClientId=self._c.cid)
+        _teleport_head(self._c, pan, tilt)
 
     def render(self, T_map_opt: np.ndarray, width: int, height: int, proj: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """RGB (HxWx3 uint8) and z-buffer (HxW float) seen from an optical frame pose."""
