@@ -123,6 +123,7 @@ class PlanningScene:
         self._link_idx: dict[str, int] = {}
         self._link_name: dict[int, str] = {}
         self._tool_idx = -1
+        self._root_home: tuple[Sequence[float], Sequence[float]] = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0))
         self._allowed: set[tuple[int, int, int, int]] = set()
         self._static: dict[int, str] = {}
         self._items: dict[str, SceneItem] = {}
@@ -204,6 +205,7 @@ class PlanningScene:
             T_root_ab = np.linalg.inv(pb_to_pose(*self._pb.getBasePositionAndOrientation(robot, physicsClientId=cid))) @ pb_to_pose(st[4], st[5])
             pos, orn = pose_to_pb(np.linalg.inv(T_root_ab))
             self._pb.resetBasePositionAndOrientation(robot, pos, orn, physicsClientId=cid)
+        self._root_home = self._pb.getBasePositionAndOrientation(robot, physicsClientId=cid)
         self._build_acm()
 
     def _robot_contacts(self) -> set[tuple[int, int]]:
@@ -272,6 +274,25 @@ class PlanningScene:
         self._set_q(q)
         st = self._pb.getLinkState(self._robot, self._tool_idx, computeForwardKinematics=1, physicsClientId=self._cid)
         return pb_to_pose(st[4], st[5])
+
+    # ------------------------------------------------------------------ robot placement
+    def place_root(self, x: float, y: float, yaw: float) -> None:
+        """Put the robot's root link (the floor frame of a mobile robot's URDF) at the
+        planar pose ``(x, y, yaw)`` [m, rad] of the scene's world, for a planner that
+        moves the base too (:mod:`mmexec.skills.manipulation.holistic`): the scene's
+        world is then ``map``, so static boxes and items must be given in ``map``.
+        :meth:`home_root` puts the arm base back at the origin (the default)."""
+        cid = self._cid if self._cid is not None else self._ensure()
+        h = 0.5 * yaw
+        self._pb.resetBasePositionAndOrientation(self._robot, (x, y, 0.0), (0.0, 0.0, math.sin(h), math.cos(h)),
+                                                 physicsClientId=cid)
+
+    def home_root(self) -> None:
+        """Put the robot back with its arm base link at the world origin (the scene's
+        world is the arm base frame again, as every arm planner expects)."""
+        cid = self._ensure()
+        pos, orn = self._root_home
+        self._pb.resetBasePositionAndOrientation(self._robot, pos, orn, physicsClientId=cid)
 
     # ------------------------------------------------------------------ static world
     def set_static_boxes(self, boxes: Iterable[SceneBox], T_armbase_map: np.ndarray | None = None) -> None:

@@ -1,0 +1,565 @@
+"""Holistic base + arm planning: where must the base stand so the arm reaches a tool pose?
+
+The paper (locobot-holistic-planning-dangerous-objects, III-B, IV-C) adds three virtual
+joints at the root of the robot's URDF, a prismatic x, a prismatic y and a revolute yaw,
+and lets MoveIt's RRT* plan the whole robot to the pre-grasp; the base's final pose goes
+to ``move_base`` and the arm's part is executed once the base is there. This module does
+the same over our own planning scene:
+
+**Model** (:class:`HolisticModel`): the state is 9-D for a 6-joint arm,
+``(base_x, base_y, base_yaw, q_1 ... q_6)``: the base's floor frame (``base_link`` of
+the interfaces, the URDF's root) in ``map`` [m, m, rad], then the arm joints [rad] in
+the description's order. Bounds: x and y within a box of ``HolisticConfig.box`` [m]
+either side of the robot's start (clipped to the map's extent), yaw within pi of the
+start heading, the arm joints within their limits. The tool pose of a state is
+``T_map_base(x, y, yaw) @ T_base_armbase (the description's arm mount) @ FK(q)``.
+
+**Validity** (:meth:`HolisticModel.is_valid`): the base's footprint free in the
+occupancy map inflated by the base radius and the navigation margin (a cell lookup,
+first: it rejects most invalid states for the price of a few microseconds), then the arm's
+planning scene (:class:`~mmexec.skills.manipulation.scene.PlanningScene`: the robot's
+own links, the static boxes in ``map``, known items) with the whole robot model placed at
+the base pose (:meth:`PlanningScene.place_root`): the base body and the arm against the
+shelves, the arm against itself.
+
+**Goal**: a set of goal states from inverse kinematics sampled over base poses (the
+paper's MoveIt samples IK for its goal too). Base poses are drawn around the target
+(arm base within the arm's horizontal reach at the target's height, facing the target
+within ``yaw_spread``), and filtered as arrays: inside the bounds, footprint free, in the
+start's free region of the map (so navigation can get there). The survivors nearest the
+robot first, each gets the arm's collision-free IK for the pre-grasp (seeded by the
+reach posture turned towards the target), and, when a grasp pose is given, the grasp
+must have IK within ``max_grasp_jump`` of it too (the straight approach is then short).
+``goal_count`` such states form an OMPL ``GoalStates``.
+
+**Search**: OMPL RRT-Connect (default) or RRT* (to its first solution) over the 9-D
+space from the start state, ``time_limit`` per attempt, ``attempts`` attempts (each with
+fresh goal samples). The result (:class:`HolisticResult`) is the goal state the tree
+connected to: the final base pose (for navigation) and the arm configuration, and the
+9-D path. Like the paper, the two parts are executed separately: the base drives to
+the pose (A* + tracking, which the free-region filter keeps possible), then the arm is
+re-planned from the pose the base actually reached (:func:`replan_arm`).
+
+Nothing here blocks a tick by itself: a call is bounded by its budget and runs on the
+arm workspace's worker thread in the skill (:mod:`mmexec.skills.manipulation.holistic_skill`);
+:attr:`HolisticPlanner.stop` makes a running call return "cancelled" early.
+
+Frames: ``map`` (z up), base ``base_link`` on the floor, ``arm_base`` the arm mount.
+Units: m, rad, s.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from mmexec.drivers.descriptions import RobotDescription
+from mmexec.drivers.geometry import wrap_angle
+from mmexec.drivers.interfaces import Pose2D, SceneBox
+from mmexec.skills.manipulation.kinematics import ArmKinematics
+from mmexec.skills.manipulation.planner import (
+    CANCELLED,
+    ArmPlanner,
+    PlannerConfig,
+    PlanResult,
+    _seed_ompl_once,
+)
+from mmexec.skills.manipulation.scene import ArmModel, PlanningScene
+from mmexec.skills.navigation.grid import CostMap
+
+__all__ = [
+    "BASE_JOINTS",
+    "HolisticConfig",
+    "HolisticModel",
+    "HolisticPlanner",
+    "HolisticResult",
+    "armbase_in_map",
+    "replan_arm",
+]
+
+log = logging.getLogger(__name__)
+
+#: Names of the three virtual joints (the paper's prismatic x, prismatic y, revolute z).
+BASE_JOINTS = ("base_x", "base_y", "base_yaw")
+
+
+@dataclass(frozen=True)
+class HolisticConfig:
+    """Settings of :class:`HolisticPlanner`.
+
+    ``algorithm`` "rrtconnect" or "rrtstar" (stopped at its first solution);
+    ``time_limit`` [s] of OMPL's search per attempt and ``attempts`` (each with fresh goal
+    samples); ``box`` [m]: the base's x and y bounds either side of the start; ``range``
+    [m|rad] OMPL's step (0: its default); ``resolution`` [m|rad]: longest step between two
+    checked states of an edge (Euclidean over the 9 coordinates, so no coordinate moves
+    more); ``goal_count`` goal states per attempt, drawn from ``goal_candidates`` base
+    poses; ``yaw_spread`` [rad]: the arm base faces the target within this; ``min_reach``
+    [m]: nearest the arm base comes to the target horizontally; ``max_grasp_jump`` [rad]:
+    largest joint change from the pre-grasp to the grasp's IK (when a grasp is given);
+    ``seed`` for the goal sampler and OMPL (deterministic for a given query sequence)."""
+
+    algorithm: str = "rrtconnect"
+    time_limit: float = 1.0
+    attempts: int = 5
+    box: float = 2.5
+    range: float = 0.0
+    resolution: float = 0.03
+    goal_count: int = 6
+    goal_candidates: int = 300
+    yaw_spread: float = math.radians(60.0)
+    min_reach: float = 0.12
+    max_grasp_jump: float = 1.0
+    seed: int | None = 0
+
+    def validate(self) -> list[str]:
+        errs = []
+        if self.algorithm not in ("rrtconnect", "rrtstar"):
+            errs.append(f"algorithm: expected 'rrtconnect' or 'rrtstar', got {self.algorithm!r}")
+        for name in ("time_limit", "box", "resolution", "max_grasp_jump"):
+            if not getattr(self, name) > 0:
+                errs.append(f"{name}: must be > 0, got {getattr(self, name)}")
+        for name in ("attempts", "goal_count", "goal_candidates"):
+            if getattr(self, name) < 1:
+                errs.append(f"{name}: must be >= 1, got {getattr(self, name)}")
+        if not 0 <= self.yaw_spread <= math.pi:
+            errs.append(f"yaw_spread: must be in [0, pi] rad, got {self.yaw_spread}")
+        if not self.min_reach >= 0 or not self.range >= 0:
+            errs.append("min_reach and range must be >= 0")
+        return errs
+
+
+@dataclass(frozen=True)
+class HolisticResult:
+    """Outcome of :meth:`HolisticPlanner.plan`: ``success``; ``reason`` when not;
+    ``planning_time`` [s] (goal sampling and search); ``base_pose`` the final base pose in
+    ``map`` (the navigation goal); ``arm`` the arm configuration there [rad]; ``path`` the
+    9-D states from the start; ``attempts`` used; ``goals`` goal states of the last
+    attempt; ``checks`` validity checks; ``start_adjusted`` when the arm's start posture
+    touched the robot itself and the search started just off it."""
+
+    success: bool
+    reason: str = ""
+    planning_time: float = 0.0
+    base_pose: Pose2D | None = None
+    arm: tuple[float, ...] | None = None
+    path: list[tuple[float, ...]] = field(default_factory=list)
+    attempts: int = 0
+    goals: int = 0
+    checks: int = 0
+    start_adjusted: bool = False
+
+
+def armbase_in_map(base: Pose2D, mount: Sequence[float]) -> np.ndarray:
+    """``T_map_armbase`` (4x4) for the base at ``base`` (``map``) and the arm ``mount``
+    (``T_base_armbase``, a translation [m])."""
+    c, s = math.cos(base.theta), math.sin(base.theta)
+    T = np.eye(4)
+    T[:2, :2] = ((c, -s), (s, c))
+    T[:3, 3] = (base.x + c * mount[0] - s * mount[1], base.y + s * mount[0] + c * mount[1], mount[2])
+    return T
+
+
+def _cells(cm: CostMap, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows, columns and in-grid flags of map points (arrays) [m], as
+    :func:`~mmexec.skills.navigation.grid.world_to_cell` for each."""
+    o = cm.grid.origin
+    c, s = math.cos(o.theta), math.sin(o.theta)
+    dx, dy = np.asarray(xs, dtype=float) - o.x, np.asarray(ys, dtype=float) - o.y
+    gx, gy = c * dx + s * dy, -s * dx + c * dy
+    rows = np.floor(gy / cm.resolution + 1e-9).astype(np.int64)
+    cols = np.floor(gx / cm.resolution + 1e-9).astype(np.int64)
+    inside = (rows >= 0) & (rows < cm.grid.height) & (cols >= 0) & (cols < cm.grid.width)
+    return rows, cols, inside
+
+
+class HolisticModel:
+    """The 9-D base + arm model of one robot over one map and planning scene (see the
+    module doc). ``scene`` is used from one thread at a time (the arm workspace's worker
+    in the skill); the model places the robot in it and puts it back in :meth:`release`.
+    ``boxes`` (static, in ``map``) and ``items`` (name -> (size [m], T_map_item)) are
+    written into the scene by :meth:`prepare`."""
+
+    def __init__(self, description: RobotDescription, kin: ArmKinematics, scene: PlanningScene, costmap: CostMap) -> None:
+        if description.arm is None:
+            raise ValueError(f"robot model {description.name!r} has no arm to plan for")
+        if tuple(scene.model.arm_joints) != tuple(kin.joint_names):
+            raise ValueError(f"holistic model: scene joints {scene.model.arm_joints} differ from {kin.joint_names}")
+        self.description = description
+        self.kin = kin
+        self.scene = scene
+        self.costmap = costmap
+        self.mount = np.asarray(description.arm_mount, dtype=float)
+        self.joint_names: tuple[str, ...] = BASE_JOINTS + tuple(kin.joint_names)
+        self._items: list[str] = []
+        free = (~costmap.blocked).astype(np.uint8)
+        self._labels = cv2.connectedComponents(free, connectivity=4)[1]
+        # the first joint's axis point (the shoulder), in arm base: the reach is from there
+        w, v = kin.screws[:3, 0], kin.screws[3:, 0]
+        self._shoulder = np.cross(w, v)
+        self.checks = 0
+
+    @classmethod
+    def build(cls, description: RobotDescription, costmap: CostMap, *, tcp_offset: float | None = None,
+              kin: ArmKinematics | None = None) -> HolisticModel:
+        """A model with its own planning scene (close it with :meth:`close`)."""
+        kin = kin or ArmKinematics.from_description(description, tcp_offset=tcp_offset)
+        return cls(description, kin, PlanningScene(ArmModel.from_description(description)), costmap)
+
+    def close(self) -> None:
+        self.scene.close()
+
+    @property
+    def dof(self) -> int:
+        return len(self.joint_names)
+
+    # ------------------------------------------------------------------ scene
+    def prepare(self, boxes: Sequence[SceneBox], items: dict[str, tuple[tuple[float, float, float], np.ndarray]] | None = None) -> None:
+        """Write the static ``boxes`` (``map``) and extra ``items`` (perceived objects, an
+        obstacle seen in front of the target: name -> (size, ``T_map_item``)) into the
+        scene, whose world is ``map`` while this model plans. Free items the scene held
+        (in an older arm base frame) are removed first; held ones stay attached."""
+        sc = self.scene
+        sc.set_static_boxes(boxes)
+        for name, it in list(sc.items.items()):
+            if not it.attached:
+                sc.remove_item(name)
+        self._items = []
+        for name, (size, T) in (items or {}).items():
+            sc.add_item(name, size, T)
+            self._items.append(name)
+
+    def release(self) -> None:
+        """Remove the items :meth:`prepare` added and put the robot back at the arm base
+        origin (the arm planners' frame)."""
+        for name in self._items:
+            if name in self.scene.items:
+                self.scene.remove_item(name)
+        self._items = []
+        self.scene.home_root()
+
+    # ------------------------------------------------------------------ geometry
+    def T_map_armbase(self, x: float, y: float, yaw: float) -> np.ndarray:
+        """The arm mount in ``map`` for base pose ``(x, y, yaw)``."""
+        return armbase_in_map(Pose2D(float(x), float(y), float(yaw)), self.mount)
+
+    def tool_pose(self, state: Sequence[float]) -> np.ndarray:
+        """``T_map_tool`` of a 9-D state (the arm's PoE forward kinematics)."""
+        return self.T_map_armbase(state[0], state[1], state[2]) @ self.kin.fk(state[3:])
+
+    def footprint_free(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """For arrays of base positions [m] in ``map``: True where the footprint is free in
+        the inflated map (off the map counts as blocked)."""
+        rows, cols, inside = _cells(self.costmap, xs, ys)
+        out = np.zeros(rows.shape, dtype=bool)
+        out[inside] = ~self.costmap.blocked[rows[inside], cols[inside]]
+        return out
+
+    def region(self, x: float, y: float) -> int:
+        """Label of the free region of the inflated map holding ``(x, y)`` (4-connected
+        cells, so A* connects any two of its cells); 0 when blocked or off the map. A
+        blocked start (the base a little inside the inflation) takes the region of the
+        nearest free cell within 0.3 m."""
+        rows, cols, inside = _cells(self.costmap, np.array([x]), np.array([y]))
+        lab = int(self._labels[rows[0], cols[0]]) if inside[0] else 0
+        if lab == 0:
+            near = self.costmap.nearest_free(x, y, 0.3)
+            if near is not None:
+                rows, cols, inside = _cells(self.costmap, np.array([near[0]]), np.array([near[1]]))
+                lab = int(self._labels[rows[0], cols[0]]) if inside[0] else 0
+        return lab
+
+    def regions(self, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+        """Free-region labels of arrays of map points (0: blocked or off the map)."""
+        rows, cols, inside = _cells(self.costmap, xs, ys)
+        out = np.zeros(rows.shape, dtype=np.int64)
+        out[inside] = self._labels[rows[inside], cols[inside]]
+        return out
+
+    def arm_valid(self, x: float, y: float, yaw: float, q: Sequence[float]) -> bool:
+        """The arm's planning scene with the robot at base pose ``(x, y, yaw)``."""
+        self.scene.place_root(x, y, yaw)
+        return self.scene.is_valid(q)
+
+    def is_valid(self, state: Sequence[float]) -> bool:
+        """Footprint free in the inflated map, then the robot model (base and arm) free in
+        the planning scene at ``state`` (9-D)."""
+        self.checks += 1
+        x, y = state[0], state[1]
+        rows, cols, inside = _cells(self.costmap, np.array([x]), np.array([y]))
+        if not inside[0] or self.costmap.blocked[rows[0], cols[0]]:
+            return False
+        return self.arm_valid(x, y, state[2], state[3:])
+
+    def collisions(self, state: Sequence[float]) -> list[tuple[str, str]]:
+        """What collides at ``state`` (readable pairs; the footprint as ``("base footprint", "map")``)."""
+        out = []
+        if not self.footprint_free(np.array([state[0]]), np.array([state[1]]))[0]:
+            out.append(("base footprint", "map"))
+        self.scene.place_root(state[0], state[1], state[2])
+        return out + self.scene.collisions(state[3:])
+
+    def horizontal_reach(self, dz: float) -> float:
+        """Largest horizontal distance [m] from the arm's first axis to a tool point
+        ``dz`` [m] above the arm base (from the arm's sampled reach)."""
+        h = dz - float(self._shoulder[2])
+        r = self.kin.reach
+        return math.sqrt(max(0.0, r * r - h * h)) + float(math.hypot(self._shoulder[0], self._shoulder[1]))
+
+
+class HolisticPlanner:
+    """OMPL over the 9-D model (see the module doc). :attr:`stop` (a threading.Event set
+    from any thread) makes a running :meth:`plan` return "cancelled"."""
+
+    def __init__(self, model: HolisticModel, config: HolisticConfig | None = None) -> None:
+        self.model = model
+        self.config = config or HolisticConfig()
+        errs = self.config.validate()
+        if errs:
+            raise ValueError("HolisticConfig: " + "; ".join(errs))
+        self.stop = threading.Event()
+
+    # ------------------------------------------------------------------ goals
+    def _candidates(self, start: Pose2D, target: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                    rng: np.random.Generator, cfg: HolisticConfig) -> tuple[np.ndarray, dict[str, int]]:
+        """Base poses (n x 3) around ``target`` (3,) whose arm base is within reach,
+        inside the bounds, with the footprint free and in the start's region, nearest the
+        start first; and the counts at each filter (for a failure's reason)."""
+        m = self.model
+        n = cfg.goal_candidates
+        r_max = m.horizontal_reach(float(target[2]) - float(m.mount[2]))
+        r_min = min(cfg.min_reach, 0.5 * r_max)
+        # area-uniform radius in the annulus, any direction from the target
+        r = np.sqrt(rng.uniform(r_min * r_min, r_max * r_max, n))
+        phi = rng.uniform(-math.pi, math.pi, n)
+        ax, ay = target[0] + r * np.cos(phi), target[1] + r * np.sin(phi)
+        yaw = phi + math.pi + rng.uniform(-cfg.yaw_spread, cfg.yaw_spread, n)  # the arm base faces the target
+        c, s = np.cos(yaw), np.sin(yaw)
+        bx = ax - (c * m.mount[0] - s * m.mount[1])
+        by = ay - (s * m.mount[0] + c * m.mount[1])
+        yaw = start.theta + np.mod(yaw - start.theta + math.pi, 2 * math.pi) - math.pi  # into the yaw bounds
+        counts = {"drawn": n}
+        ok = (bx >= lo[0]) & (bx <= hi[0]) & (by >= lo[1]) & (by <= hi[1])
+        counts["in the bounds"] = int(ok.sum())
+        ok &= m.footprint_free(bx, by)
+        counts["free for the footprint"] = int(ok.sum())
+        ok &= m.regions(bx, by) == m.region(start.x, start.y)
+        counts["reachable by the base"] = int(ok.sum())
+        poses = np.stack([bx[ok], by[ok], yaw[ok]], axis=1)
+        d = np.hypot(poses[:, 0] - start.x, poses[:, 1] - start.y)
+        return poses[np.argsort(d, kind="stable")], counts
+
+    def _goal_states(self, poses: np.ndarray, T_map_pre: np.ndarray, T_map_grasp: np.ndarray | None,
+                     seeds: Sequence[Sequence[float]], free_rotation: bool, cfg: HolisticConfig,
+                     rng: np.random.Generator) -> tuple[list[tuple[float, ...]], int]:
+        """Up to ``goal_count`` valid 9-D goal states from the base ``poses`` in order, and
+        how many poses had an IK solution at all."""
+        m = self.model
+        kin = m.kin
+        goals: list[tuple[float, ...]] = []
+        with_ik = 0
+        for bx, by, byaw in poses:
+            if self.stop.is_set() or len(goals) >= cfg.goal_count:
+                break
+            T_ab = m.T_map_armbase(bx, by, byaw)
+            T_am = np.linalg.inv(T_ab)
+            T_pre = T_am @ T_map_pre
+            bearing = math.atan2(float(T_pre[1, 3]), float(T_pre[0, 3]))
+            m.scene.place_root(float(bx), float(by), float(byaw))
+            q = None
+            for s in seeds:
+                s = np.array(s, dtype=float)
+                p = kin.fk(s)[:3, 3]
+                s[0] = float(np.clip(s[0] + wrap_angle(bearing - math.atan2(float(p[1]), float(p[0]))),
+                                     kin.limits[0].lower, kin.limits[0].upper))
+                q = kin.ik(T_pre, s, free_approach_rotation=free_rotation, attempts=1, max_iterations=80)
+                if q is not None:
+                    break
+            if q is None:
+                q = kin.ik(T_pre, None, free_approach_rotation=free_rotation, attempts=2, max_iterations=80,
+                           seed=int(rng.integers(1 << 30)))
+            if q is None:
+                continue
+            with_ik += 1
+            if not m.scene.is_valid(q):
+                continue
+            if T_map_grasp is not None:
+                qg = kin.ik(T_am @ T_map_grasp, q, free_approach_rotation=free_rotation, attempts=1, max_iterations=80)
+                if qg is None or float(np.max(np.abs(qg - q))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
+                    continue
+            goals.append((float(bx), float(by), float(byaw), *(float(v) for v in q)))
+        return goals, with_ik
+
+    # ------------------------------------------------------------------ plan
+    def bounds(self, start: Pose2D, cfg: HolisticConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of the 9-D state for a base starting at ``start``: the
+        box around it clipped to the map, yaw within pi of its heading, the arm limits
+        (a continuous joint: +-2 pi)."""
+        cfg = cfg or self.config
+        m = self.model
+        g = m.costmap.grid
+        corners = np.array([[0, 0], [g.width, 0], [0, g.height], [g.width, g.height]], dtype=float) * g.resolution
+        c, s = math.cos(g.origin.theta), math.sin(g.origin.theta)
+        mx = g.origin.x + c * corners[:, 0] - s * corners[:, 1]
+        my = g.origin.y + s * corners[:, 0] + c * corners[:, 1]
+        lo = [max(start.x - cfg.box, float(mx.min())), max(start.y - cfg.box, float(my.min())), start.theta - math.pi]
+        hi = [min(start.x + cfg.box, float(mx.max())), min(start.y + cfg.box, float(my.max())), start.theta + math.pi]
+        for a, b in m.scene.limits:
+            lo.append(a)
+            hi.append(b)
+        return np.array(lo), np.array(hi)
+
+    def plan(self, start: Pose2D, q_start: Sequence[float], T_map_pre: np.ndarray, *,
+             T_map_grasp: np.ndarray | None = None, seeds: Sequence[Sequence[float]] = (),
+             free_approach_rotation: bool = False, config: HolisticConfig | None = None) -> HolisticResult:
+        """Plan the robot from base pose ``start`` (``map``) and arm joints ``q_start``
+        [rad] until the tool is at ``T_map_pre`` (4x4 in ``map``, the pre-grasp). With
+        ``T_map_grasp`` a goal also needs the grasp's IK near it. ``seeds``: arm postures
+        that start the goal IK (turned towards the target), e.g. the profile's reach
+        pose. The scene must have been :meth:`HolisticModel.prepare`-d; it is left with
+        the robot placed anywhere (call :meth:`HolisticModel.release`)."""
+        cfg = config or self.config
+        m = self.model
+        t0 = time.perf_counter()
+        checks0 = m.scene.checks
+        lo, hi = self.bounds(start, cfg)
+        q0 = np.clip(np.asarray(q_start, dtype=float), lo[3:], hi[3:])
+        state0 = np.concatenate([[start.x, start.y, start.theta], q0])
+        rng = np.random.default_rng(cfg.seed)
+        target = np.asarray(T_map_pre, dtype=float)[:3, 3]
+
+        def fail(reason: str, used: int = 0, goals: int = 0) -> HolisticResult:
+            return HolisticResult(False, reason, time.perf_counter() - t0, attempts=used, goals=goals,
+                                  checks=m.scene.checks - checks0)
+
+        if not m.footprint_free(np.array([start.x]), np.array([start.y]))[0] and m.region(start.x, start.y) == 0:
+            return fail(f"start ({start.x:.2f}, {start.y:.2f}) is blocked in the inflated map")
+        seeds = list(seeds) + [q0]
+        used, goals = 0, []
+        adjusted = False
+        for attempt in range(cfg.attempts):
+            if self.stop.is_set():
+                return fail(CANCELLED, used, len(goals))
+            used = attempt + 1
+            poses, counts = self._candidates(start, target, lo, hi, rng, cfg)
+            goals, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, free_approach_rotation, cfg, rng)
+            if self.stop.is_set():
+                return fail(CANCELLED, used, len(goals))
+            if not goals:
+                if attempt + 1 < cfg.attempts:
+                    continue
+                chain = ", ".join(f"{v} {k}" for k, v in counts.items())
+                what = "a collision-free IK" + (" with the grasp near it" if T_map_grasp is not None else "")
+                return fail(f"no base pose within reach of the pre-grasp at ({target[0]:.2f}, {target[1]:.2f}, "
+                            f"{target[2]:.2f}): of {chain}, {with_ik} had an IK and none {what}", used)
+            start_state = state0
+            if not m.is_valid(start_state):
+                start_state, adjusted = self._fix_start(state0, np.asarray(goals[0]), lo, hi)
+                if start_state is None:
+                    pairs = ", ".join(f"{a} vs {b}" for a, b in m.collisions(state0)[:3])
+                    return fail(f"start in collision: {pairs}", used, len(goals))
+            path = self._ompl(start_state, goals, lo, hi, cfg, attempt)
+            if path is not None:
+                if adjusted:
+                    path.insert(0, tuple(float(v) for v in state0))
+                end = path[-1]
+                return HolisticResult(True, "", time.perf_counter() - t0, Pose2D(end[0], end[1], wrap_angle(end[2])),
+                                      tuple(end[3:]), path, used, len(goals), m.scene.checks - checks0, adjusted)
+        if self.stop.is_set():
+            return fail(CANCELLED, used, len(goals))
+        return fail(f"no plan within {cfg.time_limit:g} s x {cfg.attempts} attempts "
+                    f"({len(goals)} goal states in the last)", used, len(goals))
+
+    def _fix_start(self, state0: np.ndarray, goal: np.ndarray, lo: np.ndarray,
+                   hi: np.ndarray) -> tuple[np.ndarray | None, bool]:
+        """A start whose arm posture touches only the robot itself (the LoCoBot's sleep
+        pose rests on its camera tower in the model) is moved along the straight line of
+        the arm joints towards the goal's until valid (at most half way): the arm leaves
+        such a rest pose along that line anyway. Other collisions: (None, False)."""
+        m = self.model
+        pairs = m.collisions(state0)
+        if not pairs or not all(a.startswith("robot/") and b.startswith("robot/") for a, b in pairs):
+            return None, False
+        d = goal[3:] - state0[3:]
+        n = max(1, math.ceil(float(np.max(np.abs(d))) / 0.02))
+        for k in range(1, n // 2 + 1):
+            s = state0.copy()
+            s[3:] = np.clip(state0[3:] + d * k / n, lo[3:], hi[3:])
+            if m.is_valid(s):
+                return s, True
+        return None, False
+
+    def _ompl(self, start: np.ndarray, goals: list[tuple[float, ...]], lo: np.ndarray, hi: np.ndarray,
+              cfg: HolisticConfig, attempt: int) -> list[tuple[float, ...]] | None:
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+
+        ou.setLogLevel(ou.LogLevel.LOG_WARN)
+        _seed_ompl_once(cfg.seed)
+        n = self.model.dof
+        space = ob.RealVectorStateSpace(n)
+        bounds = ob.RealVectorBounds(n)
+        for i in range(n):
+            bounds.setLow(i, float(lo[i]))
+            bounds.setHigh(i, float(hi[i]))
+        space.setBounds(bounds)
+        ss = og.SimpleSetup(space)
+        is_valid = self.model.is_valid
+
+        def check(s: object) -> bool:
+            return is_valid([s[i] for i in range(n)])  # type: ignore[index]
+
+        ss.setStateValidityChecker(check)
+        si = ss.getSpaceInformation()
+        si.setStateValidityCheckingResolution(cfg.resolution / si.getMaximumExtent())
+        st = si.allocState()
+        for i in range(n):
+            st[i] = float(start[i])
+        ss.setStartState(st)
+        goal = ob.GoalStates(si)
+        for g in goals:
+            gs = si.allocState()
+            for i in range(n):
+                gs[i] = float(g[i])
+            goal.addState(gs)
+        ss.setGoal(goal)
+        if cfg.algorithm == "rrtstar":
+            planner = og.RRTstar(si)
+            obj = ob.PathLengthOptimizationObjective(si)
+            obj.setCostThreshold(ob.Cost(math.inf))  # stop at the first solution
+            ss.setOptimizationObjective(obj)
+        else:
+            planner = og.RRTConnect(si)
+        if cfg.range > 0:
+            planner.setRange(cfg.range)
+        ss.setPlanner(planner)
+        ptc = ob.plannerOrTerminationCondition(ob.timedPlannerTerminationCondition(cfg.time_limit),
+                                               ob.PlannerTerminationCondition(self.stop.is_set))
+        status = ss.solve(ptc)
+        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
+            log.info("holistic: attempt %d: %s", attempt + 1, status.getStatus())
+            return None
+        return [tuple(float(s[i]) for i in range(n)) for s in ss.getSolutionPath().getStates()]
+
+
+def replan_arm(planner: ArmPlanner, reached: Pose2D, mount: Sequence[float], q_now: Sequence[float],
+               T_map_pre: np.ndarray, boxes: Sequence[SceneBox], *, seeds: Sequence[Sequence[float]] = (),
+               free_approach_rotation: bool = False, config: PlannerConfig | None = None) -> PlanResult:
+    """The arm's part, re-planned from the base pose actually ``reached`` (``map``): the
+    static ``boxes`` (``map``) moved into the arm base frame through ``reached`` and the
+    arm ``mount`` (``T_base_armbase`` translation [m]), then RRT-Connect (or the
+    planner's algorithm) from ``q_now`` to the pre-grasp ``T_map_pre``, IK seeded first by
+    ``seeds`` (the holistic plan's arm configuration: the same solution family when the
+    base stopped close to where it was planned). The scene's robot must be at home
+    (:meth:`HolisticModel.release`)."""
+    T_am = np.linalg.inv(armbase_in_map(reached, mount))
+    planner.scene.set_static_boxes(boxes, T_am)
+    return planner.plan_to_pose(q_now, T_am @ np.asarray(T_map_pre, dtype=float), ik_seeds=seeds,
+                                free_approach_rotation=free_approach_rotation, config=config)
