@@ -85,6 +85,7 @@ _OPTION_FLAGS: dict[str, tuple[str, str]] = {
 #: Modules that define the built-in skills, imported before any user module: the
 #: primitives, operator prompts, the general skill library, the fetch mission's own.
 BUILTIN_SKILL_MODULES: tuple[str, ...] = (
+    "mmexec.skills.perception.scan",
     "mmexec.skills.primitives", "mmexec.skills.operator", "mmexec.skills.navigation.navigate",
     "mmexec.skills.navigation.approach", "mmexec.skills.search", "mmexec.skills.perception.detect",
     "mmexec.skills.manipulation.arm", "mmexec.skills.fetch",

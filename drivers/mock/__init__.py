@@ -16,6 +16,7 @@ from mmexec.drivers.mock.robot import (
     MockBase,
     MockCamera,
     MockGripper,
+    MockHead,
     MockLidar,
     MockRobot,
 )
@@ -27,6 +28,7 @@ __all__ = [
     "MockCamera",
     "MockConfig",
     "MockGripper",
+    "MockHead",
     "MockLidar",
     "MockRobot",
     "build",

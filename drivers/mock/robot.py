@@ -13,7 +13,9 @@ Outcomes are scripted through attributes that tests may change at any time, or f
 * ``robot.gripper.grasps = [False, True]``: the 1st close finds nothing, the 2nd closes on
   an object; later closes use ``robot.gripper.default_grasp``;
 * ``robot.base.blocked = True``: the base refuses to move and reports a bumper fault;
-* ``robot.camera.dropouts = {2}``: the 2nd call of :meth:`MockCamera.frame` returns None.
+* ``robot.camera.dropouts = {2}``: the 2nd call of :meth:`MockCamera.frame` returns None;
+* ``robot.head.fail_moves = {1}``: the head's 1st :meth:`MockHead.point` fails part way
+  (a robot built with ``"head"`` among its capabilities).
 
 Units and frames are those of :mod:`mmexec.drivers.interfaces` (SI, REP-103).
 """
@@ -28,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from mmexec.drivers.descriptions import RobotDescription, locobot_wx250s
+from mmexec.drivers.descriptions.head import HeadModel
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import (
     Arm,
@@ -41,6 +44,8 @@ from mmexec.drivers.interfaces import (
     GraspState,
     Gripper,
     GripperState,
+    Head,
+    HeadState,
     JointLimit,
     JointState,
     JointTrajectory,
@@ -57,6 +62,7 @@ __all__ = [
     "MockBase",
     "MockCamera",
     "MockGripper",
+    "MockHead",
     "MockLidar",
     "MockRobot",
 ]
@@ -399,6 +405,93 @@ class MockGripper(Gripper):
             m.goal.succeed(self.state())
 
 
+# --------------------------------------------------------------------------- head
+
+
+class MockHead(Head):
+    """A pan/tilt head moving both joints straight to the target at their velocity limit
+    in clock time. ``kinematics`` (a :class:`HeadModel`, e.g. the LoCoBot's) gives the
+    limits and the camera pose; targets outside the limits fail at once. A scripted
+    failing move (:attr:`fail_moves`, 1-based over :meth:`point` calls) stops half way and
+    fails. Cancel holds at once."""
+
+    def __init__(self, clock: ManualClock, kinematics: HeadModel, *, home: tuple[float, float] = (0.0, 0.0),
+                 fail_moves: Iterable[int] = ()) -> None:
+        self._clock = clock
+        self._model = kinematics
+        self._home = (float(home[0]), float(home[1]))
+        self._q = self._home
+        self._goal: Goal | None = None
+        self._target = self._q
+        self._fail_at: tuple[float, float] | None = None
+        #: Scripted: 1-based indices of :meth:`point` calls that fail half way.
+        self.fail_moves: set[int] = set(fail_moves)
+        #: Number of :meth:`point` calls so far (including refused ones), and the targets asked for.
+        self.moves = 0
+        self.targets: list[tuple[float, float]] = []
+
+    @property
+    def joint_names(self) -> tuple[str, str]:
+        return self._model.joint_names
+
+    @property
+    def limits(self) -> tuple[JointLimit, JointLimit]:
+        return self._model.limits
+
+    @property
+    def home(self) -> tuple[float, float]:
+        return self._home
+
+    @property
+    def kinematics(self) -> HeadModel:
+        return self._model
+
+    @property
+    def busy(self) -> bool:
+        """True while a goal is active."""
+        return self._goal is not None and not self._goal.done()
+
+    def state(self) -> HeadState:
+        return HeadState(self._q[0], self._q[1], self._clock.now())
+
+    def point(self, pan: float, tilt: float) -> Goal:
+        self.moves += 1
+        self.targets.append((float(pan), float(tilt)))
+        name = f"head move {self.moves}"
+        problem = self.limit_problem(pan, tilt)
+        if problem:
+            return Goal.failed(name, problem)
+        if self._goal is not None and not self._goal.done():
+            self._goal.mark_cancelled("preempted by a new head goal")
+        self._goal = Goal(name, on_cancel=self._on_cancel)
+        self._target = (float(pan), float(tilt))
+        self._fail_at = None
+        if self.moves in self.fail_moves:
+            self._fail_at = tuple((a + b) / 2.0 for a, b in zip(self._q, self._target))  # type: ignore[assignment]
+        return self._goal
+
+    def _on_cancel(self, goal: Goal) -> None:
+        self._target = self._q
+        goal.mark_cancelled("cancelled: head holding")
+
+    def stop(self) -> None:
+        if self._goal is not None and not self._goal.done():
+            self._goal.cancel()
+
+    def step(self, dt: float) -> None:
+        """Move for ``dt`` seconds."""
+        goal = self._goal
+        if goal is None or goal.done():
+            return
+        end = self._fail_at if self._fail_at is not None else self._target
+        self._q = tuple(_approach(q, t, lim.velocity * dt) for q, t, lim in zip(self._q, end, self.limits))  # type: ignore[assignment]
+        if self._q == end:
+            if self._fail_at is not None:
+                goal.fail(f"head move failed (scripted, move {self.moves})")
+            else:
+                goal.succeed(self.state())
+
+
 # --------------------------------------------------------------------------- sensors
 
 
@@ -406,7 +499,8 @@ class MockCamera(Camera):
     """An RGB-D camera returning synthetic frames: a deterministic gradient image and a
     flat depth of :attr:`depth` [m]. Calls listed in :attr:`dropouts` (1-based) return
     None, as does every call while :attr:`enabled` is False. Mounted 0.5 m above
-    ``base_link`` looking along +x (optical z forward)."""
+    ``base_link`` looking along +x (optical z forward); on a :class:`MockHead` (``head``),
+    at the head's optical frame for its current pan and tilt instead."""
 
     def __init__(
         self,
@@ -418,9 +512,11 @@ class MockCamera(Camera):
         hfov: float = 1.2,
         depth: float = 1.0,
         dropouts: Iterable[int] = (),
+        head: MockHead | None = None,
     ) -> None:
         self._clock = clock
         self._base = base
+        self.head = head
         self._intr = CameraIntrinsics.from_fov(width, height, hfov)
         self.depth = depth
         self.dropouts: set[int] = set(dropouts)
@@ -436,6 +532,9 @@ class MockCamera(Camera):
         return self._intr
 
     def pose_in_base(self) -> np.ndarray:
+        if self.head is not None:
+            st = self.head.state()
+            return self.head.kinematics.T_root_optical(st.pan, st.tilt)
         return self._T.copy()
 
     def frame(self) -> CameraFrame | None:
@@ -451,7 +550,7 @@ class MockCamera(Camera):
         rgb[..., 2] = 128
         depth = np.full((h, w), self.depth, dtype=np.float32)
         T_map_base = self._base.pose.matrix() if self._base is not None else np.eye(4)
-        return CameraFrame(rgb, depth, self._intr, self._clock.now(), self._T.copy(), T_map_base)
+        return CameraFrame(rgb, depth, self._intr, self._clock.now(), self.pose_in_base(), T_map_base)
 
 
 class MockLidar(Lidar):
@@ -490,6 +589,9 @@ class MockRobot(Robot):
     """
 
     ALL_CAPABILITIES = frozenset({"base", "arm", "gripper", "camera", "lidar"})
+    #: capabilities a mock has only when asked for: ``head``, a :class:`MockHead` with the
+    #: description's head chain (the camera then rides on it)
+    OPTIONAL_CAPABILITIES = frozenset({"head"})
 
     def __init__(
         self,
@@ -501,7 +603,7 @@ class MockRobot(Robot):
         description: RobotDescription | None = locobot_wx250s.DESCRIPTION,
     ) -> None:
         caps = set(capabilities)
-        unknown = caps - self.ALL_CAPABILITIES
+        unknown = caps - self.ALL_CAPABILITIES - self.OPTIONAL_CAPABILITIES
         if unknown:
             raise ValueError(f"MockRobot: unknown capabilities {sorted(unknown)}")
         self.name = name
@@ -511,7 +613,12 @@ class MockRobot(Robot):
         self.base: MockBase | None = MockBase(self.clock) if "base" in caps else None  # type: ignore[assignment]
         self.arm: MockArm | None = MockArm(self.clock) if "arm" in caps else None  # type: ignore[assignment]
         self.gripper: MockGripper | None = MockGripper(self.clock) if "gripper" in caps else None  # type: ignore[assignment]
-        self.camera: MockCamera | None = MockCamera(self.clock, self.base) if "camera" in caps else None  # type: ignore[assignment]
+        model = HeadModel.of(description) if "head" in caps and description is not None else None
+        if "head" in caps and model is None:
+            raise ValueError(f"MockRobot: a head needs a description with pan/tilt joints, got {description}")
+        self.head: MockHead | None = MockHead(self.clock, model) if model is not None else None  # type: ignore[assignment]
+        self.camera: MockCamera | None = (  # type: ignore[assignment]
+            MockCamera(self.clock, self.base, head=self.head) if "camera" in caps else None)
         self.lidar: MockLidar | None = MockLidar(self.clock) if "lidar" in caps else None  # type: ignore[assignment]
         self.closed = False
         self.safe_stops = 0
@@ -523,7 +630,7 @@ class MockRobot(Robot):
             raise ValueError(f"spin period must be > 0 s, got {period}")
         self.clock.advance(period)
         self.spins += 1
-        for cap in (self.base, self.arm, self.gripper):
+        for cap in (self.base, self.arm, self.gripper, self.head):
             if cap is not None:
                 cap.step(period)
 
@@ -542,4 +649,6 @@ class MockRobot(Robot):
             motion = getattr(cap, "_motion", None) if cap is not None else None
             if motion is not None and motion.goal.state in (GoalState.ACTIVE, GoalState.CANCELLING):
                 out.append(motion.goal)
+        if self.head is not None and self.head.busy:
+            out.append(self.head._goal)  # type: ignore[arg-type]
         return out
