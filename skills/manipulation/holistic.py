@@ -10,7 +10,8 @@ the same over our own planning scene:
 ``(base_x, base_y, base_yaw, q_1 ... q_6)``: the base's floor frame (``base_link`` of
 the interfaces, the URDF's root) in ``map`` [m, m, rad], then the arm joints [rad] in
 the description's order. Bounds: x and y within a box of ``HolisticConfig.box`` [m]
-either side of the robot's start (clipped to the map's extent), yaw within pi of the
+either side of the robot's start, widened to hold every base pose within the arm's reach
+of the target (clipped to the map's extent), yaw within pi of the
 start heading, the arm joints within their limits. The tool pose of a state is
 ``T_map_base(x, y, yaw) @ T_base_armbase (the description's arm mount) @ FK(q)``.
 
@@ -63,6 +64,7 @@ import numpy as np
 from mmexec.drivers.descriptions import RobotDescription
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import Pose2D, SceneBox
+from mmexec.skills.manipulation.batch_ik import batch_ik
 from mmexec.skills.manipulation.kinematics import ArmKinematics
 from mmexec.skills.manipulation.planner import (
     CANCELLED,
@@ -96,14 +98,17 @@ class HolisticConfig:
 
     ``algorithm`` "rrtconnect" or "rrtstar" (stopped at its first solution);
     ``time_limit`` [s] of OMPL's search per attempt and ``attempts`` (each with fresh goal
-    samples); ``box`` [m]: the base's x and y bounds either side of the start; ``range``
+    samples); ``box`` [m]: the base's x and y bounds either side of the start
+    (widened to hold the target's surroundings); ``range``
     [m|rad] OMPL's step (0: its default); ``resolution`` [m|rad]: longest step between two
     checked states of an edge (Euclidean over the 9 coordinates, so no coordinate moves
     more); ``goal_count`` goal states per attempt, drawn from ``goal_candidates`` base
     poses; ``yaw_spread`` [rad]: the arm base faces the target within this; ``min_reach``
     [m]: nearest the arm base comes to the target horizontally; ``max_grasp_jump`` [rad]:
     largest joint change from the pre-grasp to the grasp's IK (when a grasp is given);
-    ``seed`` for the goal sampler and OMPL (deterministic for a given query sequence)."""
+    ``tolerance`` [m, rad]: a goal's base pose shifted this much (x, y and yaw, four
+    ways) must still reach the pre-grasp, as navigation stops near, not at, the pose
+    ((0, 0): not checked); ``seed`` for the goal sampler and OMPL (deterministic for a given query sequence)."""
 
     algorithm: str = "rrtconnect"
     time_limit: float = 1.0
@@ -116,6 +121,7 @@ class HolisticConfig:
     yaw_spread: float = math.radians(60.0)
     min_reach: float = 0.12
     max_grasp_jump: float = 1.0
+    tolerance: tuple[float, float] = (0.03, 0.03)
     seed: int | None = 0
 
     def validate(self) -> list[str]:
@@ -130,8 +136,8 @@ class HolisticConfig:
                 errs.append(f"{name}: must be >= 1, got {getattr(self, name)}")
         if not 0 <= self.yaw_spread <= math.pi:
             errs.append(f"yaw_spread: must be in [0, pi] rad, got {self.yaw_spread}")
-        if not self.min_reach >= 0 or not self.range >= 0:
-            errs.append("min_reach and range must be >= 0")
+        if not self.min_reach >= 0 or not self.range >= 0 or not min(self.tolerance) >= 0:
+            errs.append("min_reach, range and tolerance must be >= 0")
         return errs
 
 
@@ -194,12 +200,10 @@ class HolisticModel:
         self.description = description
         self.kin = kin
         self.scene = scene
-        self.costmap = costmap
         self.mount = np.asarray(description.arm_mount, dtype=float)
         self.joint_names: tuple[str, ...] = BASE_JOINTS + tuple(kin.joint_names)
         self._items: list[str] = []
-        free = (~costmap.blocked).astype(np.uint8)
-        self._labels = cv2.connectedComponents(free, connectivity=4)[1]
+        self.use_map(costmap)
         # the first joint's axis point (the shoulder), in arm base: the reach is from there
         w, v = kin.screws[:3, 0], kin.screws[3:, 0]
         self._shoulder = np.cross(w, v)
@@ -214,6 +218,13 @@ class HolisticModel:
 
     def close(self) -> None:
         self.scene.close()
+
+    def use_map(self, costmap: CostMap) -> None:
+        """Plan over ``costmap`` (the occupancy map inflated by the base radius and margin)
+        from now on; its free regions are labelled once here."""
+        self.costmap = costmap
+        free = (~costmap.blocked).astype(np.uint8)
+        self._labels = cv2.connectedComponents(free, connectivity=4)[1]
 
     @property
     def dof(self) -> int:
@@ -356,51 +367,95 @@ class HolisticPlanner:
         return poses[np.argsort(d, kind="stable")], counts
 
     def _goal_states(self, poses: np.ndarray, T_map_pre: np.ndarray, T_map_grasp: np.ndarray | None,
-                     seeds: Sequence[Sequence[float]], free_rotation: bool, cfg: HolisticConfig,
+                     seeds: Sequence[Sequence[float]], stow: np.ndarray, free_rotation: bool, cfg: HolisticConfig,
                      rng: np.random.Generator) -> tuple[list[tuple[float, ...]], int]:
-        """Up to ``goal_count`` valid 9-D goal states from the base ``poses`` in order, and
-        how many poses had an IK solution at all."""
+        """Up to ``goal_count`` valid 9-D goal states from the base ``poses`` (n x 3) in
+        order, and how many poses had an IK solution at all. The pre-grasp's IK runs for
+        all poses at once (:func:`~mmexec.skills.manipulation.batch_ik.batch_ik`), from
+        each seed posture turned towards the target, then from one random start; the
+        collision checks and the grasp's IK only for solved poses, in order, until enough.
+        A goal also needs the arm's ``stow`` posture free at its base pose (the base drives
+        there with the arm stowed) and the pre-grasp's IK from the base pose shifted by
+        ``tolerance``."""
         m = self.model
         kin = m.kin
+        k = len(poses)
+        if k == 0:
+            return [], 0
+        # the pre-grasp in each candidate's arm base frame
+        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        R_ab = np.zeros((k, 3, 3))
+        R_ab[:, 0, 0], R_ab[:, 0, 1], R_ab[:, 1, 0], R_ab[:, 1, 1], R_ab[:, 2, 2] = c, -s, s, c, 1.0
+        t_ab = np.stack([poses[:, 0] + c * m.mount[0] - s * m.mount[1],
+                         poses[:, 1] + s * m.mount[0] + c * m.mount[1], np.full(k, m.mount[2])], axis=1)
+        Rt = np.transpose(R_ab, (0, 2, 1))
+        T_pre = np.zeros((k, 4, 4))
+        T_pre[:, 3, 3] = 1.0
+        T_pre[:, :3, :3] = Rt @ T_map_pre[:3, :3]
+        T_pre[:, :3, 3] = np.einsum("bij,bj->bi", Rt, T_map_pre[:3, 3] - t_ab)
+        bearing = np.arctan2(T_pre[:, 1, 3], T_pre[:, 0, 3])
+        q = np.zeros((k, kin.dof))
+        solved = np.zeros(k, dtype=bool)
+        lo, hi = kin.lower, kin.upper
+        starts = []
+        for seed in seeds:
+            s0 = np.asarray(seed, dtype=float)
+            p = kin.fk(s0)[:3, 3]
+            Q0 = np.tile(s0, (k, 1))
+            Q0[:, 0] = np.clip(s0[0] + np.mod(bearing - math.atan2(float(p[1]), float(p[0])) + math.pi, 2 * math.pi)
+                               - math.pi, lo[0], hi[0])
+            starts.append(Q0)
+        starts.append(rng.uniform(np.maximum(lo, -math.pi), np.minimum(hi, math.pi), (k, kin.dof)))
+        for Q0 in starts:
+            todo = np.flatnonzero(~solved)
+            if todo.size == 0 or self.stop.is_set():
+                break
+            qs, ok = batch_ik(kin, T_pre[todo], Q0[todo], free_approach_rotation=free_rotation, max_iterations=80)
+            q[todo[ok]] = qs[ok]
+            solved[todo[ok]] = True
         goals: list[tuple[float, ...]] = []
-        with_ik = 0
-        for bx, by, byaw in poses:
+        for i in np.flatnonzero(solved):
             if self.stop.is_set() or len(goals) >= cfg.goal_count:
                 break
-            T_ab = m.T_map_armbase(bx, by, byaw)
-            T_am = np.linalg.inv(T_ab)
-            T_pre = T_am @ T_map_pre
-            bearing = math.atan2(float(T_pre[1, 3]), float(T_pre[0, 3]))
-            m.scene.place_root(float(bx), float(by), float(byaw))
-            q = None
-            for s in seeds:
-                s = np.array(s, dtype=float)
-                p = kin.fk(s)[:3, 3]
-                s[0] = float(np.clip(s[0] + wrap_angle(bearing - math.atan2(float(p[1]), float(p[0]))),
-                                     kin.limits[0].lower, kin.limits[0].upper))
-                q = kin.ik(T_pre, s, free_approach_rotation=free_rotation, attempts=1, max_iterations=80)
-                if q is not None:
-                    break
-            if q is None:
-                q = kin.ik(T_pre, None, free_approach_rotation=free_rotation, attempts=2, max_iterations=80,
-                           seed=int(rng.integers(1 << 30)))
-            if q is None:
-                continue
-            with_ik += 1
-            if not m.scene.is_valid(q):
+            bx, by, byaw = (float(v) for v in poses[i])
+            if not m.arm_valid(bx, by, byaw, q[i]) or not m.scene.is_valid(stow):
                 continue
             if T_map_grasp is not None:
-                qg = kin.ik(T_am @ T_map_grasp, q, free_approach_rotation=free_rotation, attempts=1, max_iterations=80)
-                if qg is None or float(np.max(np.abs(qg - q))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
+                T_am = np.eye(4)
+                T_am[:3, :3], T_am[:3, 3] = Rt[i], -Rt[i] @ t_ab[i]
+                qg = kin.ik(T_am @ T_map_grasp, q[i], free_approach_rotation=free_rotation, attempts=1, max_iterations=80)
+                if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
                     continue
-            goals.append((float(bx), float(by), float(byaw), *(float(v) for v in q)))
-        return goals, with_ik
+            if not self._tolerant(bx, by, byaw, q[i], T_map_pre, free_rotation, cfg):
+                continue
+            goals.append((bx, by, byaw, *(float(v) for v in q[i])))
+        return goals, int(solved.sum())
+
+    def _tolerant(self, x: float, y: float, yaw: float, q: np.ndarray, T_map_pre: np.ndarray, free_rotation: bool,
+                  cfg: HolisticConfig) -> bool:
+        """The pre-grasp has a collision-free IK (seeded by ``q``) from the base pose
+        shifted by ``cfg.tolerance`` four ways: (+d, 0, +a), (-d, 0, -a), (0, +d, -a),
+        (0, -d, +a) in the base's own axes."""
+        d, a = cfg.tolerance
+        if d == 0 and a == 0:
+            return True
+        m = self.model
+        c, s = math.cos(yaw), math.sin(yaw)
+        for fx, fy, fa in ((d, 0.0, a), (-d, 0.0, -a), (0.0, d, -a), (0.0, -d, a)):
+            px, py, pyaw = x + c * fx - s * fy, y + s * fx + c * fy, yaw + fa
+            T = np.linalg.inv(m.T_map_armbase(px, py, pyaw)) @ T_map_pre
+            qs = m.kin.ik(T, q, free_approach_rotation=free_rotation, attempts=1, max_iterations=60)
+            if qs is None or not m.arm_valid(px, py, pyaw, qs):
+                return False
+        return True
 
     # ------------------------------------------------------------------ plan
-    def bounds(self, start: Pose2D, cfg: HolisticConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Lower and upper bounds of the 9-D state for a base starting at ``start``: the
-        box around it clipped to the map, yaw within pi of its heading, the arm limits
-        (a continuous joint: +-2 pi)."""
+    def bounds(self, start: Pose2D, target: Sequence[float] | None = None,
+               cfg: HolisticConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bounds of the 9-D state for a base starting at ``start``: x and
+        y within ``box`` of it, widened to hold every base pose within the arm's reach of
+        ``target`` (map point [m]) too, clipped to the map; yaw within pi of the start
+        heading; the arm's joint limits (a continuous joint: +-2 pi)."""
         cfg = cfg or self.config
         m = self.model
         g = m.costmap.grid
@@ -408,8 +463,13 @@ class HolisticPlanner:
         c, s = math.cos(g.origin.theta), math.sin(g.origin.theta)
         mx = g.origin.x + c * corners[:, 0] - s * corners[:, 1]
         my = g.origin.y + s * corners[:, 0] + c * corners[:, 1]
-        lo = [max(start.x - cfg.box, float(mx.min())), max(start.y - cfg.box, float(my.min())), start.theta - math.pi]
-        hi = [min(start.x + cfg.box, float(mx.max())), min(start.y + cfg.box, float(my.max())), start.theta + math.pi]
+        xs, ys = [start.x - cfg.box, start.x + cfg.box], [start.y - cfg.box, start.y + cfg.box]
+        if target is not None:
+            r = m.kin.reach + float(np.hypot(m.mount[0], m.mount[1])) + 0.05
+            xs += [target[0] - r, target[0] + r]
+            ys += [target[1] - r, target[1] + r]
+        lo = [max(min(xs), float(mx.min())), max(min(ys), float(my.min())), start.theta - math.pi]
+        hi = [min(max(xs), float(mx.max())), min(max(ys), float(my.max())), start.theta + math.pi]
         for a, b in m.scene.limits:
             lo.append(a)
             hi.append(b)
@@ -428,11 +488,11 @@ class HolisticPlanner:
         m = self.model
         t0 = time.perf_counter()
         checks0 = m.scene.checks
-        lo, hi = self.bounds(start, cfg)
+        target = np.asarray(T_map_pre, dtype=float)[:3, 3]
+        lo, hi = self.bounds(start, target, cfg)
         q0 = np.clip(np.asarray(q_start, dtype=float), lo[3:], hi[3:])
         state0 = np.concatenate([[start.x, start.y, start.theta], q0])
         rng = np.random.default_rng(cfg.seed)
-        target = np.asarray(T_map_pre, dtype=float)[:3, 3]
 
         def fail(reason: str, used: int = 0, goals: int = 0) -> HolisticResult:
             return HolisticResult(False, reason, time.perf_counter() - t0, attempts=used, goals=goals,
@@ -448,14 +508,16 @@ class HolisticPlanner:
                 return fail(CANCELLED, used, len(goals))
             used = attempt + 1
             poses, counts = self._candidates(start, target, lo, hi, rng, cfg)
-            goals, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, free_approach_rotation, cfg, rng)
+            goals, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, q0, free_approach_rotation,
+                                               cfg, rng)
             if self.stop.is_set():
                 return fail(CANCELLED, used, len(goals))
             if not goals:
                 if attempt + 1 < cfg.attempts:
                     continue
                 chain = ", ".join(f"{v} {k}" for k, v in counts.items())
-                what = "a collision-free IK" + (" with the grasp near it" if T_map_grasp is not None else "")
+                what = ("a collision-free IK" + (", the grasp near it" if T_map_grasp is not None else "")
+                        + ", room for the stowed arm and the navigation tolerance")
                 return fail(f"no base pose within reach of the pre-grasp at ({target[0]:.2f}, {target[1]:.2f}, "
                             f"{target[2]:.2f}): of {chain}, {with_ik} had an IK and none {what}", used)
             start_state = state0
