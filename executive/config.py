@@ -89,6 +89,7 @@ BUILTIN_SKILL_MODULES: tuple[str, ...] = (
     "mmexec.skills.primitives", "mmexec.skills.operator", "mmexec.skills.navigation.navigate",
     "mmexec.skills.navigation.approach", "mmexec.skills.search", "mmexec.skills.perception.detect",
     "mmexec.skills.manipulation.arm", "mmexec.skills.fetch",
+    "mmexec.skills.buttons",
 )
 
 

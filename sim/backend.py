@@ -341,6 +341,9 @@ class SimRobot(Robot):
         reproduces a run."""
         if not (self.arm.at_rest() and self.gripper.at_rest()) or (self.head is not None and not self.head.at_rest()):
             return False
+        panels = self.scene_handles.panels
+        if panels is not None and not panels.at_rest():  # a button still springing back
+            return False
         cid = self.cid
         items = self.scene_handles.items
         for body in items.values():
@@ -386,6 +389,8 @@ class SimRobot(Robot):
                 core.sync()
                 p.stepSimulation(physicsClientId=self.cid)
                 self.physics_steps += 1
+                if self.scene_handles.panels is not None:
+                    self.scene_handles.panels.step(self.clock.now() + dt)
             self.clock.steps += 1
             if self.recorder is not None:
                 core.sync()

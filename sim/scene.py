@@ -18,6 +18,7 @@ import pybullet as p
 
 from mmexec.drivers.geometry import position_quat
 from mmexec.sim.markers import QUIET_RATIO, marker_texture_path
+from mmexec.sim.panel import HOUSING_COLOR, SimPanels
 from mmexec.sim.world import World
 
 __all__ = [
@@ -49,6 +50,7 @@ _COLORS = {
     "depot": (0.2, 0.5, 0.8, 1.0),
     "obstacle": (0.8, 0.45, 0.2, 1.0),
     "reflector": (0.95, 0.95, 0.95, 1.0),
+    "panel": HOUSING_COLOR,
 }
 
 
@@ -61,6 +63,7 @@ class SceneHandles:
     static_names: tuple[str, ...]
     floor: int
     items: Mapping[str, int]
+    panels: SimPanels | None = None  #: the control panels' caps, lights and markers (sim/panel.py)
 
 
 def yaw_of(T: np.ndarray) -> float:
@@ -126,6 +129,11 @@ def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float
             p.setCollisionFilterGroupMask(body, li, GROUP_ITEM, GROUP_QUERY | GROUP_STATIC | GROUP_ITEM | GROUP_BODY | GROUP_ARM,
                                           physicsClientId=cid)
         items[it.name] = body
+    panels = None
+    if world.spec.panels:
+        panels = SimPanels.spawn(world.spec.panels, world.panel_poses, cid,
+                                 texture_path=lambda mid: marker_texture_path(mid, texture_dir),
+                                 group=GROUP_STATIC, mask=GROUP_QUERY | GROUP_ITEM | GROUP_ARM)
     cylinders = {o.name for o in world.obstacles if o.shape == "cylinder"} | {r.name for r in world.spec.reflectors}
     names, cols, viss, poss, orns = [], [], [], [], []
     # walls after the furniture in front of them (drawing order, see above)
@@ -161,4 +169,4 @@ def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float
     floor = p.createMultiBody(0, floor_col, _floor_visual(cid, sx, sy), [0, 0, 0], physicsClientId=cid)
     p.changeDynamics(floor, -1, lateralFriction=0.8, physicsClientId=cid)
     p.setCollisionFilterGroupMask(floor, -1, GROUP_STATIC, GROUP_QUERY | GROUP_ITEM | GROUP_ARM, physicsClientId=cid)
-    return SceneHandles(static=static, static_names=tuple(names), floor=floor, items=items)
+    return SceneHandles(static=static, static_names=tuple(names), floor=floor, items=items, panels=panels)

@@ -16,6 +16,10 @@ true clearance and its gap to every person, and one record per contact. Records 
                    distance less both radii, each)
 ``contact``        ``t``, ``part`` (``base``: a move the bumper refused; ``arm``: an arm
                    link touching static geometry or a person), ``body`` hit, ``pose``
+``panel_press``    a press of a control panel's button (sim/panel.py): panel, button, ``t``,
+                   ``end``, deepest travel ``depth_mm``, ``switched`` (past 70 % of the
+                   travel), the press point's ``offset_mm`` from the button's centre
+``panel_end``      each panel light at the end (``panel/button`` -> on) and the presses
 ``truth_end``      ticks, the smallest clearance (and where), the smallest gap per person,
                    the number of contacts and the bodies they were with
 =================  ========================================================================
@@ -207,12 +211,21 @@ class TruthLog:
             rec["gaps"] = [round(float(g), 4) for g in gaps]
         self._write("truth", **rec)
         self.ticks += 1
+        panels = core.scene.panels
+        if panels is not None:  # the control panels' presses (sim/panel.py)
+            for press in panels.drain():
+                self._write("panel_press", **press.record())
 
     def close(self) -> None:
         """Write the summary and close the file."""
         if self._out.closed:
             return
         c, where = self.min_clearance
+        panels = self._core.scene.panels
+        if panels is not None:
+            for press in panels.drain():
+                self._write("panel_press", **press.record())
+            self._write("panel_end", lights=panels.lights(), presses=len(panels.presses))
         self._write("truth_end", ticks=self.ticks, min_clearance=round(c, 4) if math.isfinite(c) else None,
                     nearest=where, min_gap={n: round(g, 4) if math.isfinite(g) else None for n, g in self.min_gap.items()},
                     contacts=self.contacts, contact_bodies=self.contact_bodies)

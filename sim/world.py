@@ -31,6 +31,7 @@ import numpy as np
 from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, did_you_mean, load_yaml
 from mmexec.drivers.geometry import planar_transform, wrap_angle
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, SceneBox
+from mmexec.sim.panel import Panel, panel_boxes, panel_transform
 
 __all__ = [
     "WORLDS_DIR",
@@ -271,10 +272,12 @@ class Randomize:
     person_speed: float = 0.0
     person_pause: float = 0.0
     person_delay: float = 0.0
+    panel_xy: float = 0.0
+    panel_yaw: float = 0.0
 
     def validate(self) -> list[str]:
         if min(self.item_xy, self.item_yaw, self.start_xy, self.start_yaw, self.obstacle_xy, self.person_xy,
-               self.person_speed, self.person_pause, self.person_delay) < 0:
+               self.person_speed, self.person_pause, self.person_delay, self.panel_xy, self.panel_yaw) < 0:
             return ["randomize: half-ranges must be >= 0"]
         return []
 
@@ -295,6 +298,7 @@ class WorldSpec:
     people: tuple[Person, ...] = ()
     randomize: Randomize = field(default_factory=Randomize)
     description: str = ""
+    panels: tuple[Panel, ...] = ()
 
 
 def _T(x: float, y: float, z: float, yaw: float) -> np.ndarray:
@@ -318,6 +322,7 @@ class World:
     obstacles: tuple[Obstacle, ...]
     start: Pose2D
     people: tuple[Person, ...] = ()
+    panel_poses: Mapping[str, np.ndarray] = field(default_factory=dict)  #: ``T_map_panel`` (sim/panel.py)
 
     @property
     def name(self) -> str:
@@ -388,6 +393,8 @@ class World:
         for o in self.obstacles:
             size = o.size if o.shape == "box" else (o.size[0], o.size[0], o.size[2])
             out.append((o.name, _T(o.pose[0], o.pose[1], o.size[2] / 2, o.pose[2]), size, "obstacle"))
+        for pn in self.spec.panels:
+            out += [(n, T, size, "panel") for n, T, size in panel_boxes(pn, self.panel_poses[pn.name])]
         for rf in self.spec.reflectors:
             out.append((rf.name, _T(rf.position[0], rf.position[1], rf.height / 2, 0.0),
                         (2 * rf.radius, 2 * rf.radius, rf.height), "reflector"))
@@ -398,7 +405,8 @@ class World:
         walls, obstacles), ``pose`` = ``T_map_box`` centre, ``size`` full extents [m]: the
         robot's prior knowledge, so unmapped obstacles are left out."""
         hidden = self.unmapped_names()
-        return tuple(SceneBox(n, T, s) for n, T, s, _ in self.static_boxes() if n not in hidden)
+        # a panel can be moved: a robot adds it to its planning scene from what it sees
+        return tuple(SceneBox(n, T, s) for n, T, s, kind in self.static_boxes() if n not in hidden and kind != "panel")
 
     def occupancy(self, resolution: float = 0.05) -> OccupancyGrid:
         """A map_server-style grid in ``map``: 100 where a wall, shelf, table, depot,
@@ -501,7 +509,26 @@ def load_world(
     start = Pose2D(sx + rng.uniform(-rz.start_xy, rz.start_xy), sy + rng.uniform(-rz.start_xy, rz.start_xy),
                    wrap_angle(syaw + rng.uniform(-rz.start_yaw, rz.start_yaw)))
     people = tuple(_place_person(spec.room, pe, rng, rz) for pe in spec.people) + tuple(extra_people)
-    return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start, people=people)
+    # panels from their own stream: a world without them draws what it always drew
+    prng = np.random.default_rng(None if seed is None else [seed, PANEL_STREAM])
+    panel_poses = {pn.name: _place_panel(pn, prng, rz) for pn in spec.panels}
+    return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start, people=people,
+                 panel_poses=panel_poses)
+
+
+#: generator stream of the run seed (``default_rng([seed, stream])``) for the panels' poses
+PANEL_STREAM = 0x70616E6C
+
+
+def _place_panel(pn: Panel, rng: np.random.Generator, rz: Randomize) -> np.ndarray:
+    """``T_map_panel`` of ``pn`` with its position moved by up to ``panel_xy`` [m] and its
+    yaw turned by up to ``panel_yaw`` [rad] (nothing drawn for a zero half-range)."""
+    x, y, yaw = pn.pose
+    if rz.panel_xy > 0:
+        x, y = x + rng.uniform(-rz.panel_xy, rz.panel_xy), y + rng.uniform(-rz.panel_xy, rz.panel_xy)
+    if rz.panel_yaw > 0:
+        yaw = wrap_angle(yaw + rng.uniform(-rz.panel_yaw, rz.panel_yaw))
+    return panel_transform(float(x), float(y), float(yaw), pn.height)
 
 
 def mark_of_raw(raw: Any, default: Mark) -> Mark:
@@ -519,7 +546,7 @@ def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
     """Names unique, references resolve, items fit their shelves, everything in the room."""
     seen: dict[str, str] = {}
     sx, sy = spec.room.size
-    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors", "people"):
+    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors", "people", "panels"):
         marks = _list_marks(raw, key)
         for i, obj in enumerate(getattr(spec, key)):
             m = marks[i] if i < len(marks) else raw.mark
@@ -565,6 +592,11 @@ def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
         if it.table is not None and it.table not in tables:
             problems.add(item_raw.value_mark("table"), f"items[{i}].table: no table {it.table!r}"
                          + (did_you_mean(it.table, tables) or f" (tables: {', '.join(tables) or 'none'})"))
+    for m, pn in zip(_list_marks(raw, "panels"), spec.panels):
+        for mid in pn.marker_ids():
+            if mid in markers:
+                problems.add(m, f"panels: {pn.name!r}: marker {mid} already used by {markers[mid]!r}")
+            markers[mid] = pn.name
     st = spec.start
     if not (0 < st[0] < sx and 0 < st[1] < sy):
         problems.add(raw.value_mark("start"), f"start: ({st[0]}, {st[1]}) is outside the {sx} x {sy} m room")
