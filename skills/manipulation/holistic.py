@@ -71,7 +71,9 @@ from mmexec.skills.manipulation.planner import (
     ArmPlanner,
     PlannerConfig,
     PlanResult,
-    _seed_ompl_once,
+    ompl_setup,
+    ompl_solve,
+    ompl_state,
 )
 from mmexec.skills.manipulation.scene import ArmModel, PlanningScene
 from mmexec.skills.navigation.grid import CostMap
@@ -190,9 +192,11 @@ class HolisticModel:
     module doc). ``scene`` is used from one thread at a time (the arm workspace's worker
     in the skill); the model places the robot in it and puts it back in :meth:`release`.
     ``boxes`` (static, in ``map``) and ``items`` (name -> (size [m], T_map_item)) are
-    written into the scene by :meth:`prepare`."""
+    written into the scene by :meth:`prepare`. ``mount``: ``T_base_armbase`` translation
+    [m] (default: the description's arm mount; a skill passes the arm's own)."""
 
-    def __init__(self, description: RobotDescription, kin: ArmKinematics, scene: PlanningScene, costmap: CostMap) -> None:
+    def __init__(self, description: RobotDescription, kin: ArmKinematics, scene: PlanningScene, costmap: CostMap,
+                 mount: Sequence[float] | None = None) -> None:
         if description.arm is None:
             raise ValueError(f"robot model {description.name!r} has no arm to plan for")
         if tuple(scene.model.arm_joints) != tuple(kin.joint_names):
@@ -200,7 +204,7 @@ class HolisticModel:
         self.description = description
         self.kin = kin
         self.scene = scene
-        self.mount = np.asarray(description.arm_mount, dtype=float)
+        self.mount = np.asarray(description.arm_mount if mount is None else mount, dtype=float)
         self.joint_names: tuple[str, ...] = BASE_JOINTS + tuple(kin.joint_names)
         self._items: list[str] = []
         self.use_map(costmap)
@@ -477,12 +481,14 @@ class HolisticPlanner:
 
     def plan(self, start: Pose2D, q_start: Sequence[float], T_map_pre: np.ndarray, *,
              T_map_grasp: np.ndarray | None = None, seeds: Sequence[Sequence[float]] = (),
-             free_approach_rotation: bool = False, config: HolisticConfig | None = None) -> HolisticResult:
+             q_drive: Sequence[float] | None = None, free_approach_rotation: bool = False,
+             config: HolisticConfig | None = None) -> HolisticResult:
         """Plan the robot from base pose ``start`` (``map``) and arm joints ``q_start``
         [rad] until the tool is at ``T_map_pre`` (4x4 in ``map``, the pre-grasp). With
         ``T_map_grasp`` a goal also needs the grasp's IK near it. ``seeds``: arm postures
         that start the goal IK (turned towards the target), e.g. the profile's reach
-        pose. The scene must have been :meth:`HolisticModel.prepare`-d; it is left with
+        pose. ``q_drive``: the arm posture the base drives in (default ``q_start``), which
+        must be free at the goal's base pose too. The scene must have been :meth:`HolisticModel.prepare`-d; it is left with
         the robot placed anywhere (call :meth:`HolisticModel.release`)."""
         cfg = config or self.config
         m = self.model
@@ -492,6 +498,7 @@ class HolisticPlanner:
         lo, hi = self.bounds(start, target, cfg)
         q0 = np.clip(np.asarray(q_start, dtype=float), lo[3:], hi[3:])
         state0 = np.concatenate([[start.x, start.y, start.theta], q0])
+        drive = q0 if q_drive is None else np.clip(np.asarray(q_drive, dtype=float), lo[3:], hi[3:])
         rng = np.random.default_rng(cfg.seed)
 
         def fail(reason: str, used: int = 0, goals: int = 0) -> HolisticResult:
@@ -508,7 +515,7 @@ class HolisticPlanner:
                 return fail(CANCELLED, used, len(goals))
             used = attempt + 1
             poses, counts = self._candidates(start, target, lo, hi, rng, cfg)
-            goals, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, q0, free_approach_rotation,
+            goals, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, drive, free_approach_rotation,
                                                cfg, rng)
             if self.stop.is_set():
                 return fail(CANCELLED, used, len(goals))
@@ -560,53 +567,17 @@ class HolisticPlanner:
     def _ompl(self, start: np.ndarray, goals: list[tuple[float, ...]], lo: np.ndarray, hi: np.ndarray,
               cfg: HolisticConfig, attempt: int) -> list[tuple[float, ...]] | None:
         from ompl import base as ob
-        from ompl import geometric as og
-        from ompl import util as ou
 
-        ou.setLogLevel(ou.LogLevel.LOG_WARN)
-        _seed_ompl_once(cfg.seed)
         n = self.model.dof
-        space = ob.RealVectorStateSpace(n)
-        bounds = ob.RealVectorBounds(n)
-        for i in range(n):
-            bounds.setLow(i, float(lo[i]))
-            bounds.setHigh(i, float(hi[i]))
-        space.setBounds(bounds)
-        ss = og.SimpleSetup(space)
-        is_valid = self.model.is_valid
-
-        def check(s: object) -> bool:
-            return is_valid([s[i] for i in range(n)])  # type: ignore[index]
-
-        ss.setStateValidityChecker(check)
-        si = ss.getSpaceInformation()
-        si.setStateValidityCheckingResolution(cfg.resolution / si.getMaximumExtent())
-        st = si.allocState()
-        for i in range(n):
-            st[i] = float(start[i])
-        ss.setStartState(st)
+        ss, si = ompl_setup(list(zip(lo, hi)), self.model.is_valid, resolution=cfg.resolution, seed=cfg.seed,
+                            algorithm=cfg.algorithm, step=cfg.range)
+        ss.setStartState(ompl_state(si, start))
         goal = ob.GoalStates(si)
         for g in goals:
-            gs = si.allocState()
-            for i in range(n):
-                gs[i] = float(g[i])
-            goal.addState(gs)
+            goal.addState(ompl_state(si, g))
         ss.setGoal(goal)
-        if cfg.algorithm == "rrtstar":
-            planner = og.RRTstar(si)
-            obj = ob.PathLengthOptimizationObjective(si)
-            obj.setCostThreshold(ob.Cost(math.inf))  # stop at the first solution
-            ss.setOptimizationObjective(obj)
-        else:
-            planner = og.RRTConnect(si)
-        if cfg.range > 0:
-            planner.setRange(cfg.range)
-        ss.setPlanner(planner)
-        ptc = ob.plannerOrTerminationCondition(ob.timedPlannerTerminationCondition(cfg.time_limit),
-                                               ob.PlannerTerminationCondition(self.stop.is_set))
-        status = ss.solve(ptc)
-        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
-            log.info("holistic: attempt %d: %s", attempt + 1, status.getStatus())
+        if not ompl_solve(ss, cfg.time_limit, self.stop):
+            log.info("holistic: attempt %d found no plan", attempt + 1)
             return None
         return [tuple(float(s[i]) for i in range(n)) for s in ss.getSolutionPath().getStates()]
 

@@ -21,9 +21,10 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,8 @@ from mmexec.drivers.interfaces import JointLimit, JointTrajectory
 from mmexec.skills.manipulation.kinematics import ArmKinematics
 from mmexec.skills.manipulation.scene import PlanningScene
 
-__all__ = ["CANCELLED", "ArmPlanner", "PlanResult", "PlannerConfig", "time_parametrize"]
+__all__ = ["CANCELLED", "ArmPlanner", "PlanResult", "PlannerConfig", "ompl_setup", "ompl_solve", "ompl_state",
+           "time_parametrize"]
 
 log = logging.getLogger(__name__)
 
@@ -273,48 +275,11 @@ class ArmPlanner:
         return all(self.scene.is_valid(qa + (qb - qa) * k / n) for k in range(1, n + 1))
 
     def _ompl(self, q_start: Sequence[float], q_goal: Sequence[float], cfg: PlannerConfig, attempt: int) -> list[tuple[float, ...]] | None:
-        from ompl import base as ob
-        from ompl import geometric as og
-        from ompl import util as ou
-
-        ou.setLogLevel(ou.LogLevel.LOG_WARN)
-        _seed_ompl_once(cfg.seed)
         n = self.kin.dof
-        space = ob.RealVectorStateSpace(n)
-        bounds = ob.RealVectorBounds(n)
-        for i, (lo, hi) in enumerate(self.scene.limits):
-            bounds.setLow(i, float(lo))
-            bounds.setHigh(i, float(hi))
-        space.setBounds(bounds)
-        ss = og.SimpleSetup(space)
-        is_valid = self.scene.is_valid
-
-        def check(s: object) -> bool:
-            return is_valid([s[i] for i in range(n)])  # type: ignore[index]
-
-        ss.setStateValidityChecker(check)
-        si = ss.getSpaceInformation()
-        si.setStateValidityCheckingResolution(cfg.resolution / si.getMaximumExtent())
-        start, goal = si.allocState(), si.allocState()
-        for i in range(n):
-            start[i] = float(q_start[i])
-            goal[i] = float(q_goal[i])
-        ss.setStartAndGoalStates(start, goal)
-        if cfg.algorithm == "rrtstar":
-            planner = og.RRTstar(si)
-            obj = ob.PathLengthOptimizationObjective(si)
-            obj.setCostThreshold(ob.Cost(math.inf))  # stop at the first solution
-            ss.setOptimizationObjective(obj)
-        else:
-            planner = og.RRTConnect(si)
-        if cfg.range > 0:
-            planner.setRange(cfg.range)
-        ss.setPlanner(planner)
-        stop = self.stop
-        ptc = ob.plannerOrTerminationCondition(ob.timedPlannerTerminationCondition(cfg.time_limit),
-                                               ob.PlannerTerminationCondition(stop.is_set))
-        status = ss.solve(ptc)
-        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
+        ss, si = ompl_setup(self.scene.limits, self.scene.is_valid, resolution=cfg.resolution, seed=cfg.seed,
+                            algorithm=cfg.algorithm, step=cfg.range)
+        ss.setStartAndGoalStates(ompl_state(si, q_start), ompl_state(si, q_goal))
+        if not ompl_solve(ss, cfg.time_limit, self.stop):
             return None
         sol = ss.getSolutionPath()
         raw = [tuple(float(st[i]) for i in range(n)) for st in sol.getStates()]
@@ -434,6 +399,66 @@ class ArmPlanner:
                                 velocity_scale=cfg.velocity_scale, acceleration_scale=cfg.acceleration_scale,
                                 sample_period=cfg.sample_period)
         return PlanResult(True, "", time.perf_counter() - t0, path, traj, 1)
+
+
+def ompl_setup(limits: Sequence[tuple[float, float]], is_valid: Callable[[list[float]], bool], *, resolution: float,
+               seed: int | None, algorithm: str, step: float = 0.0) -> tuple[Any, Any]:
+    """An OMPL ``SimpleSetup`` over the box ``limits`` ((low, high) per coordinate) whose
+    states are valid when ``is_valid`` (called with the coordinates as a list) says so,
+    edges checked every ``resolution`` (Euclidean over all coordinates), and its
+    planner: "rrtconnect", or "rrtstar" stopped at its first solution; ``step`` the
+    planner's range (0: OMPL's default). Returns ``(setup, space information)``; set the
+    start and goal, then :func:`ompl_solve`."""
+    from ompl import base as ob
+    from ompl import geometric as og
+    from ompl import util as ou
+
+    ou.setLogLevel(ou.LogLevel.LOG_WARN)
+    _seed_ompl_once(seed)
+    n = len(limits)
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for i, (lo, hi) in enumerate(limits):
+        bounds.setLow(i, float(lo))
+        bounds.setHigh(i, float(hi))
+    space.setBounds(bounds)
+    ss = og.SimpleSetup(space)
+
+    def check(s: Any) -> bool:
+        return is_valid([s[i] for i in range(n)])
+
+    ss.setStateValidityChecker(check)
+    si = ss.getSpaceInformation()
+    si.setStateValidityCheckingResolution(resolution / si.getMaximumExtent())
+    if algorithm == "rrtstar":
+        planner = og.RRTstar(si)
+        obj = ob.PathLengthOptimizationObjective(si)
+        obj.setCostThreshold(ob.Cost(math.inf))  # stop at the first solution
+        ss.setOptimizationObjective(obj)
+    else:
+        planner = og.RRTConnect(si)
+    if step > 0:
+        planner.setRange(step)
+    ss.setPlanner(planner)
+    return ss, si
+
+
+def ompl_state(si: Any, values: Sequence[float]) -> Any:
+    """A new OMPL state of space information ``si`` holding ``values``."""
+    st = si.allocState()
+    for i, v in enumerate(values):
+        st[i] = float(v)
+    return st
+
+
+def ompl_solve(ss: Any, time_limit: float, stop: threading.Event) -> bool:
+    """Run the setup's planner for at most ``time_limit`` [s], or until ``stop`` is set;
+    True for an exact solution (``ss.getSolutionPath()``)."""
+    from ompl import base as ob
+
+    ptc = ob.plannerOrTerminationCondition(ob.timedPlannerTerminationCondition(time_limit),
+                                           ob.PlannerTerminationCondition(stop.is_set))
+    return bool(ss.solve(ptc).getStatus() == ob.PlannerStatus.EXACT_SOLUTION)
 
 
 _OMPL_SEEDED: list[int] = []

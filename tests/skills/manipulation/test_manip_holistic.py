@@ -1,0 +1,222 @@
+"""The holistic base + arm planner (skills/manipulation/holistic.py): the 9-D model's joints
+and bounds, its validity (footprint in the inflated map, the robot in the planning scene),
+a blocked-front query solved, unsolvable ones failing with a clear reason, and the batched
+IK it samples goals with."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mmexec.drivers.descriptions import get
+from mmexec.drivers.interfaces import Pose2D
+from mmexec.sim.world import Obstacle, load_world
+from mmexec.skills.manipulation.batch_ik import batch_fk, batch_ik
+from mmexec.skills.manipulation.grasp import grasp_poses
+from mmexec.skills.manipulation.holistic import (
+    BASE_JOINTS,
+    HolisticConfig,
+    HolisticModel,
+    HolisticPlanner,
+    armbase_in_map,
+)
+from mmexec.skills.manipulation.kinematics import ur5e, wx250s
+from mmexec.skills.navigation.astar import plan_path
+from mmexec.skills.navigation.grid import inflate
+from mmexec.skills.navigation.standoff import find_standoff
+
+DESC = get("locobot_wx250s")
+TUCK = (0.0, -0.4, 1.1, 0.0, 1.4, 0.0)  # config/locobot_sim.yaml's stow pose
+HOME = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)   # its reach pose: stretched forward
+
+
+def _marker_frame(world, item: str) -> np.ndarray:
+    """The marker frame (z out of the item's +x face, y up) of a world item, in map."""
+    T_item = world.item_poses[item]
+    x = T_item[:3, 0]
+    T = np.eye(4)
+    T[:3, 2], T[:3, 1] = x, (0.0, 0.0, 1.0)
+    T[:3, 0] = np.cross(T[:3, 1], T[:3, 2])
+    T[:3, 3] = T_item[:3, 3] + x * world.item(item).size[0] / 2
+    return T
+
+
+@pytest.fixture(scope="module")
+def lab():
+    """The lab with a 0.2 m high box on the floor in front of box_1 (far shelf, lower
+    board): no stand-off of the LoCoBot's approach distances is free."""
+    T_marker = _marker_frame(load_world("lab"), "box_1")
+    n = T_marker[:3, 2]
+    c = T_marker[:3, 3] + 0.32 * n
+    blocker = Obstacle("blocker", (float(c[0]), float(c[1]), math.atan2(n[1], n[0])), (0.3, 0.4, 0.2))
+    world = load_world("lab", extra_obstacles=(blocker,))
+    cm = inflate(world.occupancy(0.05), DESC.info.footprint_radius, 0.03)
+    return world, cm, T_marker
+
+
+@pytest.fixture(scope="module")
+def model(lab):
+    world, cm, _ = lab
+    m = HolisticModel.build(DESC, cm)
+    m.prepare(world.scene_boxes())
+    yield m
+    m.close()
+
+
+def test_model_joints_and_bounds(model, lab):
+    _, _cm, T_marker = lab
+    assert model.joint_names == BASE_JOINTS + DESC.info.arm_joints
+    assert model.dof == 9
+    planner = HolisticPlanner(model, HolisticConfig(box=1.0))
+    start = Pose2D(2.5, 2.0, 0.5)
+    lo, hi = planner.bounds(start)
+    assert lo[:2] == pytest.approx([1.5, 1.0]) and hi[:2] == pytest.approx([3.5, 3.0])
+    assert (lo[2], hi[2]) == pytest.approx((0.5 - math.pi, 0.5 + math.pi))
+    assert np.allclose(np.stack([lo[3:], hi[3:]], 1), model.scene.limits)
+    # widened to hold the target's surroundings, clipped to the map (origin at the wall's outside)
+    lo, hi = planner.bounds(start, T_marker[:3, 3])
+    assert hi[0] == pytest.approx(5.1) and lo[0] == pytest.approx(1.5)
+    assert hi[0] > T_marker[0, 3]
+    # the tool pose of a state is the base pose, the mount and the arm's FK
+    state = (1.0, 2.0, math.pi / 2, *TUCK)
+    T = armbase_in_map(Pose2D(1.0, 2.0, math.pi / 2), DESC.arm_mount) @ model.kin.fk(TUCK)
+    assert np.allclose(model.tool_pose(state), T)
+    assert T[0, 3] == pytest.approx(1.0, abs=0.05) and T[1, 3] > 2.0  # in front of the base, which faces +y
+
+
+def test_validity(model, lab):
+    world, _cm, _ = lab
+    # the base's footprint on the blocker in front of the far shelf: invalid whatever the arm does
+    blocker = next(o for o in world.obstacles if o.name == "blocker")
+    on_blocker = (blocker.pose[0], blocker.pose[1], 0.0, *TUCK)
+    assert not model.footprint_free(np.array([blocker.pose[0]]), np.array([blocker.pose[1]]))[0]
+    assert not model.is_valid(on_blocker)
+    assert ("base footprint", "map") in model.collisions(on_blocker)
+    # free footprint, arm stretched into the south wall (the base 0.45 m from it, facing it)
+    into_wall = (1.2, 0.45, -math.pi / 2, *HOME)
+    assert model.footprint_free(np.array([1.2]), np.array([0.45]))[0]
+    assert not model.is_valid(into_wall)
+    assert any(b == "wall_south" for _, b in model.collisions(into_wall))
+    # the same base pose with the arm tucked: valid; off the map: invalid
+    assert model.is_valid((1.2, 0.45, -math.pi / 2, *TUCK))
+    assert not model.is_valid((-1.0, 2.0, 0.0, *TUCK))
+    # arrays: footprint and the start's free region
+    xs, ys = np.array([1.2, blocker.pose[0], 8.0]), np.array([0.45, blocker.pose[1], 2.0])
+    assert model.footprint_free(xs, ys).tolist() == [True, False, False]
+    regions = model.regions(xs, ys)
+    assert regions[0] == model.region(2.5, 2.0) > 0 and regions[1] == regions[2] == 0
+
+
+def test_blocked_front_query_solved(model, lab):
+    world, cm, T_marker = lab
+    assert not find_standoff(cm, T_marker, [0.35, 0.45, 0.55]).ok  # the premise: the front is blocked
+    poses = grasp_poses(T_marker, model.kin.approach_axis, pre_grasp=(0.0, 0.0, 0.10), grasp_depth=0.03)
+    start = Pose2D(2.5, 2.0, 0.0)
+    planner = HolisticPlanner(model, HolisticConfig(seed=3))
+    res = planner.plan(start, TUCK, poses.pre_grasp, T_map_grasp=poses.grasp, seeds=[HOME])
+    assert res.success, res.reason
+    assert res.base_pose is not None and res.arm is not None
+    b = res.base_pose
+    # the base pose is free in the inflated map and A* gets there from the start
+    assert cm.is_free(b.x, b.y)
+    assert plan_path(cm, (start.x, start.y), (b.x, b.y)) is not None
+    # the arm reaches the pre-grasp from there (PoE forward kinematics), collision-free, stow too
+    state = (b.x, b.y, b.theta, *res.arm)
+    T = armbase_in_map(b, DESC.arm_mount) @ wx250s().fk(res.arm)
+    assert np.linalg.norm(T[:3, 3] - poses.pre_grasp[:3, 3]) < 1e-3
+    assert np.allclose(T[:3, :3], poses.pre_grasp[:3, :3], atol=1e-2)
+    assert model.is_valid(state)
+    assert model.arm_valid(b.x, b.y, b.theta, TUCK)
+    # the 9-D path starts at the start and ends at the goal, every state valid
+    assert res.path[0][:3] == pytest.approx((start.x, start.y, start.theta))
+    assert res.path[-1] == pytest.approx(state)
+    assert all(model.is_valid(s) for s in res.path[1:])
+    # not in front of the blocker: beside it or behind it
+    assert not any(math.dist((b.x, b.y), (p.x, p.y)) < 0.05
+                   for p in [find_standoff(inflate(load_world("lab").occupancy(0.05), 0.178, 0.03), T_marker,
+                                           [d]).pose for d in (0.35, 0.45, 0.55)] if p is not None)
+    model.release()
+    model.prepare(world.scene_boxes())
+
+
+def test_unsolvable_queries_fail_with_a_reason(model, lab):
+    world, _cm, T_marker = lab
+    planner = HolisticPlanner(model, HolisticConfig(attempts=2, goal_candidates=100))
+    # a pre-grasp 1.6 m up: no base pose brings the arm there
+    T = np.array(T_marker)
+    T[2, 3] = 1.6
+    res = planner.plan(Pose2D(2.5, 2.0, 0.0), TUCK, T, seeds=[HOME])
+    assert not res.success and res.base_pose is None
+    assert res.reason.startswith("no base pose within reach of the pre-grasp at (4.6")
+    assert "had an IK" in res.reason and res.attempts == 2
+    # a start on the blocker
+    blocker = next(o for o in world.obstacles if o.name == "blocker")
+    res = planner.plan(Pose2D(blocker.pose[0], blocker.pose[1], 0.0), TUCK, T_marker)
+    assert not res.success and "blocked in the inflated map" in res.reason
+    # cancelled before it starts
+    planner.stop.set()
+    res = planner.plan(Pose2D(2.5, 2.0, 0.0), TUCK, T_marker)
+    planner.stop.clear()
+    assert not res.success and res.reason == "cancelled"
+    model.release()
+    model.prepare(world.scene_boxes())
+
+
+@pytest.mark.parametrize("kin", [wx250s(), ur5e()], ids=["wx250s", "ur5e"])
+def test_batch_ik_matches_the_arm(kin):
+    rng = np.random.default_rng(1)
+    Q = rng.uniform(np.maximum(kin.lower, -3.0), np.minimum(kin.upper, 3.0), (40, kin.dof))
+    R, p, J = batch_fk(kin, Q)
+    for k in range(40):
+        T, Js = kin.fk_and_jacobian(Q[k])
+        assert np.allclose(R[k], T[:3, :3]) and np.allclose(p[k], T[:3, 3]) and np.allclose(J[k], Js)
+    targets = np.stack([kin.fk(q) for q in Q])
+    starts = np.clip(Q + rng.normal(0.0, 0.4, Q.shape), kin.lower, kin.upper)
+    for free in (False, True):
+        q, ok = batch_ik(kin, targets, starts, free_approach_rotation=free)
+        assert ok.sum() >= 36
+        for k in np.flatnonzero(ok):
+            T = kin.fk(q[k])
+            assert np.linalg.norm(T[:3, 3] - targets[k][:3, 3]) < 1e-3
+            a = kin.approach_axis
+            assert float(T[:3, a] @ targets[k][:3, a]) > 0.999
+            assert kin.within_limits(q[k])
+    # a target beyond the reach never converges
+    far = targets[:1].copy()
+    far[0, :3, 3] = (3.0, 0.0, 0.0)
+    assert not batch_ik(kin, far, starts[:1])[1][0]
+
+
+def test_holistic_standoff_skill_on_the_mock(mock_robot, run_mock_skill, skill_ctx, lab):
+    """The skill plans, drives the mock base there (A* + tracking on the lab map with the
+    blocker), re-plans the arm from the pose reached and moves it to the pre-grasp."""
+    from mmexec.skills.base import SkillStatus
+    from mmexec.skills.manipulation.arm import close_workspace
+    from mmexec.skills.manipulation.holistic_skill import grasp_frame  # registers the skill
+
+    world, _, T_marker = lab
+    mock_robot.occupancy = world.occupancy(0.05)
+    mock_robot.scene = tuple(world.scene_boxes())
+    mock_robot.base.pose = Pose2D(2.5, 2.0, 0.0)
+    mock_robot.profile["named_poses"]["tuck"] = list(TUCK)
+    mock_robot.profile["arm"] = {"stow": "tuck", "reach": "home"}
+    point = (T_marker[:3, 3] - 0.03 * T_marker[:3, 2]).tolist()  # the box's centre, 3 cm behind its face
+    yaw = math.atan2(T_marker[1, 2], T_marker[0, 2])
+    try:
+        run = run_mock_skill("holistic_standoff", {"point": point, "grasp": "front", "yaw": yaw,
+                                                   "size": [0.06, 0.06, 0.06]})
+        assert run.status is SkillStatus.SUCCESS, run.failure
+        out = run.outputs
+        reached = Pose2D(*out["pose"])
+        assert math.dist(out["pose"][:2], out["planned"][:2]) < 0.1
+        # the arm is at the pre-grasp as seen from the pose the base reached
+        T_pre = grasp_poses(grasp_frame(point, "front", yaw), 0, pre_grasp=(0.0, 0.0, 0.10)).pre_grasp
+        q = mock_robot.arm.state().positions
+        T = reached.matrix() @ np.asarray(mock_robot.arm.mount) @ wx250s().fk(q)
+        assert np.linalg.norm(T[:3, 3] - T_pre[:3, 3]) < 0.01
+        events = [e for e, _ in skill_ctx.events]
+        assert "holistic_plan" in events and "base_status" in events
+    finally:
+        close_workspace(skill_ctx.world)
