@@ -90,6 +90,7 @@ BUILTIN_SKILL_MODULES: tuple[str, ...] = (
     "mmexec.skills.navigation.approach", "mmexec.skills.search", "mmexec.skills.perception.detect",
     "mmexec.skills.manipulation.arm", "mmexec.skills.fetch",
     "mmexec.skills.buttons",
+    "mmexec.skills.manipulation.holistic_skill",
 )
 
 
