@@ -100,7 +100,8 @@ class BackendSpec(Generic[Parsed]):
     profile adds on top of it. ``randomize_key`` is the section key a campaign sets to
     draw the world anew with each trial's seed (None: nothing to draw).
     ``item_markers(section)`` lists the marker ids of the items the backend's world holds
-    (``--draw item=@markers``; None: it has no such world)."""
+    (``--draw item=@markers``; None: it has no such world); ``object_names(section)`` the
+    names of its untagged objects (``--draw item=@objects``)."""
 
     name: str
     parse_section: Callable[[YDict | None], Parsed]
@@ -113,6 +114,7 @@ class BackendSpec(Generic[Parsed]):
     fault_patches: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     randomize_key: str | None = None
     item_markers: Callable[[Mapping[str, Any] | None], tuple[int, ...]] | None = None
+    object_names: Callable[[Mapping[str, Any] | None], tuple[str, ...]] | None = None
 
     def __post_init__(self) -> None:
         if not self.options <= set(OPTIONS):

@@ -439,7 +439,10 @@ def _attach_operator(runner: Any, answers: Path | None) -> None:
     from mmexec.skills.operator import OPERATOR_KEY
 
     if answers is not None:
-        runner.world[OPERATOR_KEY] = ScriptedAnswers(load_answers(answers), answers)
+        from mmexec.executive.sim_operator import sim_click_operator
+
+        sim = sim_click_operator(answers, lambda: runner.robot, runner.options.seed)  # a 'sim_click:' file
+        runner.world[OPERATOR_KEY] = sim or ScriptedAnswers(load_answers(answers), answers)
     elif sys.stdin is not None and sys.stdin.isatty():
         term = TerminalOperator(sys.stdin.fileno(), sys.stderr, progress=runner.progress)
         runner.world[OPERATOR_KEY] = term

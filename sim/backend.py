@@ -326,6 +326,7 @@ class SimRobot(Robot):
         self.head: SimHead | None = None
         core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
         self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}
+        self._item_radius.update({o.name: 0.5 * math.sqrt(sum(x * x for x in o.model.size)) for o in world.spec.objects})
         self.physics_steps = 0  #: substeps that ran stepSimulation (the others were at rest)
         self.truth_log: TruthLog | None = None  #: SIM-ONLY ground-truth sidecar (``sim.truth_log``)
         self._kidnap_pending = cfg.faults.kidnap is not None
@@ -558,6 +559,11 @@ def item_markers(section: Mapping[str, Any] | None) -> tuple[int, ...]:
     return tuple(it.marker for it in world.spec.items)
 
 
+def object_names(section: Mapping[str, Any] | None) -> tuple[str, ...]:
+    """The names of the untagged objects of the section's world (sim/objects.py)."""
+    return load_world(str((section or {}).get("world", "lab"))).object_names()
+
+
 #: Merge patch of the ``sim:`` section that switches every injected fault off (sensor and
 #: odometry noise stay as configured).
 FAULTS_OFF: dict[str, Any] = {"faults": None}
@@ -590,4 +596,5 @@ BACKEND: BackendSpec[SimSection] = BackendSpec(
     fault_patches=FAULT_PATCHES,
     randomize_key="randomize",
     item_markers=item_markers,
+    object_names=object_names,
 )

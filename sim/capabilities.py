@@ -117,6 +117,9 @@ class SimCore:
     clearance: ClearanceMap | None = None  #: static-geometry clearance for the base (set by the backend)
     people: SimPeople | None = None
     contacts: list[Contact] = field(default_factory=list)
+    #: every grasp so far: (clock time [s], item, the item's link indices the pads touch;
+    #: -1 the base link): ground truth of which part of an object the fingers hold
+    grasps: list[tuple[float, str, tuple[int, ...]]] = field(default_factory=list)
     _placed: Pose2D | None = field(default=None, repr=False)
 
     def sync(self) -> None:
@@ -651,6 +654,9 @@ class SimGripper(Gripper):
         self.held = name
         c.held_body = body
         self._hold_T = rel
+        touched = {pt[4] for li in self._pads for pt in p.getContactPoints(bodyA=c.body, bodyB=body, linkIndexA=li,
+                                                                          physicsClientId=c.cid) if pt[8] < 0.002}
+        c.grasps.append((c.clock.now(), name, tuple(sorted(touched))))
         self._held_since = c.clock.now()
         self._slip_after = c.faults.slip_after(name)
 

@@ -18,6 +18,7 @@ import pybullet as p
 
 from mmexec.drivers.geometry import position_quat
 from mmexec.sim.markers import QUIET_RATIO, marker_texture_path
+from mmexec.sim.objects import spawn_objects
 from mmexec.sim.panel import HOUSING_COLOR, SimPanels
 from mmexec.sim.world import World
 
@@ -57,7 +58,8 @@ _COLORS = {
 @dataclass(frozen=True)
 class SceneHandles:
     """Body ids in the pybullet client: ``static`` (all fixed parts; link i is
-    ``static_names[i]``), ``floor``, ``items`` by name."""
+    ``static_names[i]``), ``floor``, ``items`` by name (the untagged objects of
+    :mod:`mmexec.sim.objects` too: the gripper holds either)."""
 
     static: int
     static_names: tuple[str, ...]
@@ -129,6 +131,8 @@ def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float
             p.setCollisionFilterGroupMask(body, li, GROUP_ITEM, GROUP_QUERY | GROUP_STATIC | GROUP_ITEM | GROUP_BODY | GROUP_ARM,
                                           physicsClientId=cid)
         items[it.name] = body
+    items.update(spawn_objects(world.spec.objects, world.object_poses, cid,
+                               (GROUP_ITEM, GROUP_QUERY | GROUP_STATIC | GROUP_ITEM | GROUP_BODY | GROUP_ARM)))
     panels = None
     if world.spec.panels:
         panels = SimPanels.spawn(world.spec.panels, world.panel_poses, cid,

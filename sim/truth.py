@@ -45,6 +45,7 @@ import pybullet as p
 from mmexec.config.yamlload import InputError, Mark
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.sim.capabilities import Contact, SimCore
+from mmexec.sim.objects import parts_touched
 from mmexec.sim.world import World
 
 __all__ = ["StaticFootprints", "TruthLog", "open_truth_log", "truth_log_path"]
@@ -131,6 +132,8 @@ class TruthLog:
         self._arm_links = arm_links
         self._reach = _reach(core, arm_links)  # [m] radius round the base holding the arm at any pose
         self._seen_contacts = len(core.contacts)
+        self._seen_grasps = len(core.grasps)
+        self._objects = {o.name: o for o in world.spec.objects}
         self._arm_touching: frozenset[tuple[int, int]] = frozenset()
         self.ticks = 0
         self.min_clearance = (math.inf, "")
@@ -196,6 +199,9 @@ class TruthLog:
         for c in core.contacts[self._seen_contacts:]:
             self._contact(c)
         self._seen_contacts = len(core.contacts)
+        for t, item, links in core.grasps[self._seen_grasps:]:  # which parts of an object the pads hold
+            self._write("grasp", t=round(t, 4), item=item, links=list(links), parts=list(parts_touched(self._objects, item, links)))
+        self._seen_grasps = len(core.grasps)
         d, name = self._static.distance(pose.x, pose.y)
         clearance = d - self._radius
         if clearance < self.min_clearance[0]:

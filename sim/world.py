@@ -31,6 +31,7 @@ import numpy as np
 from mmexec.config.yamlload import InputError, Mark, Problems, YDict, bind, did_you_mean, load_yaml
 from mmexec.drivers.geometry import planar_transform, wrap_angle
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, SceneBox
+from mmexec.sim.objects import SimObject, check_placement, place_object
 from mmexec.sim.panel import Panel, panel_boxes, panel_transform
 
 __all__ = [
@@ -298,6 +299,7 @@ class WorldSpec:
     people: tuple[Person, ...] = ()
     randomize: Randomize = field(default_factory=Randomize)
     description: str = ""
+    objects: tuple[SimObject, ...] = ()
     panels: tuple[Panel, ...] = ()
 
 
@@ -323,10 +325,15 @@ class World:
     start: Pose2D
     people: tuple[Person, ...] = ()
     panel_poses: Mapping[str, np.ndarray] = field(default_factory=dict)  #: ``T_map_panel`` (sim/panel.py)
+    object_poses: Mapping[str, np.ndarray] = field(default_factory=dict)  #: ``T_map_object`` (sim/objects.py)
 
     @property
     def name(self) -> str:
         return self.spec.name
+
+    def object_names(self) -> tuple[str, ...]:
+        """Names of the untagged objects (:mod:`mmexec.sim.objects`)."""
+        return tuple(o.name for o in self.spec.objects)
 
     def item(self, name: str) -> Item:
         for it in self.spec.items:
@@ -512,7 +519,11 @@ def load_world(
     # panels from their own stream: a world without them draws what it always drew
     prng = np.random.default_rng(None if seed is None else [seed, PANEL_STREAM])
     panel_poses = {pn.name: _place_panel(pn, prng, rz) for pn in spec.panels}
+    # untagged objects draw from their own stream: a world without them draws what it always drew
+    orng = np.random.default_rng(None if seed is None else [seed, 15])
+    object_poses = {o.name: place_object(spec, o, orng, rz.item_xy, rz.item_yaw) for o in spec.objects}
     return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start, people=people,
+                 object_poses=object_poses,
                  panel_poses=panel_poses)
 
 
@@ -546,7 +557,7 @@ def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
     """Names unique, references resolve, items fit their shelves, everything in the room."""
     seen: dict[str, str] = {}
     sx, sy = spec.room.size
-    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors", "people", "panels"):
+    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors", "people", "objects", "panels"):
         marks = _list_marks(raw, key)
         for i, obj in enumerate(getattr(spec, key)):
             m = marks[i] if i < len(marks) else raw.mark
@@ -597,6 +608,9 @@ def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
             if mid in markers:
                 problems.add(m, f"panels: {pn.name!r}: marker {mid} already used by {markers[mid]!r}")
             markers[mid] = pn.name
+    for m, obj in zip(_list_marks(raw, "objects"), spec.objects):
+        for msg in check_placement(spec, obj):
+            problems.add(m, msg)
     st = spec.start
     if not (0 < st[0] < sx and 0 < st[1] < sy):
         problems.add(raw.value_mark("start"), f"start: ({st[0]}, {st[1]}) is outside the {sx} x {sy} m room")

@@ -12,6 +12,7 @@ catalogue file holds that knowledge per item::
         places: [tool_shelf, workbench]  # named base poses in map (the profile's places)
         size: [0.20, 0.03, 0.03]         # m: the footprint's two sides (any order), the height
         dangerous: true                  # ask the operator for the dangerous part
+        grasp: top                       # top (from above) or front (horizontal); default: the profile's
       tape:
         places: [workbench]
         size: [0.10, 0.10, 0.05]
@@ -31,6 +32,7 @@ from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
+from typing import Literal
 
 from mmexec.config.yamlload import (
     Mark,
@@ -52,14 +54,16 @@ class CatalogueItem:
     """One item: ``name`` (as requests spell it), the ``detector_class`` label that finds
     it, its likely ``places`` (names of base poses in ``map``, most likely first), its
     ``size`` [m] (the footprint's two sides, any order, and the height, as it stands on
-    its support) and whether it is ``dangerous`` (the operator marks its dangerous part
-    before the grasp)."""
+    its support), whether it is ``dangerous`` (the operator marks its dangerous part
+    before the grasp) and its ``grasp`` (``top``: from above, orthogonal to the support;
+    ``front``: horizontal, from the robot's side; None: the robot profile's default)."""
 
     name: str
     detector_class: str
     places: tuple[str, ...]
     size: tuple[float, float, float]
     dangerous: bool
+    grasp: str | None = None
 
 
 class UnknownItem(KeyError):
@@ -99,6 +103,7 @@ class _ItemEntry:
     detector_class: str | None = None
     places: list[str] = field(default_factory=list)
     dangerous: bool = False
+    grasp: Literal["top", "front"] | None = None
 
 
 @dataclass(frozen=True)
@@ -168,7 +173,7 @@ def load_catalogue(
     assert isinstance(bound, _CatalogueFile)
     items = {
         k: CatalogueItem(k, e.detector_class or k, tuple(e.places), tuple(float(v) for v in e.size),  # type: ignore[arg-type]
-                         e.dangerous)
+                         e.dangerous, e.grasp)
         for k, e in bound.items.items()
     }
     return Catalogue(name, MappingProxyType(items))

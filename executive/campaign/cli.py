@@ -39,12 +39,15 @@ def add_campaign_parser(sub: Any) -> None:
     c.add_argument("--request", action="append", nargs="+", default=[], metavar="K=V",
                    help="a fixed request served by every trial (repeat for more)")
     c.add_argument("--requests", type=Path, metavar="FILE", help="YAML list of fixed requests")
-    c.add_argument("--draw", action="append", default=[], metavar="FIELD=V1,V2|@markers",
-                   help="draw a request field per trial from these values (@markers: the sim world's items)")
+    c.add_argument("--draw", action="append", default=[], metavar="FIELD=V1,V2|@markers|@objects",
+                   help="draw a request field per trial from these values (@markers: the sim world's items' "
+                        "marker ids; @objects: its untagged objects' names)")
     c.add_argument("--requests-per-trial", type=int, default=1, metavar="R", help="drawn requests per trial")
     c.add_argument("--param", action="append", default=[], metavar="K=V", help="override a mission parameter")
     c.add_argument("--request-timeout", type=float, metavar="S", help="clock seconds per request (mmexec run)")
     c.add_argument("--trial-timeout", type=float, metavar="S", help="wall seconds per trial before it is killed")
+    c.add_argument("--answers", type=Path, metavar="FILE",
+                   help="answers to ask_operator prompts for every trial (mmexec run --answers)")
     c.add_argument("--mcap", action="store_true",
                    help="also record each trial as DIR/trials/NNNN.mcap (Foxglove; docs/foxglove.md)")
     c.add_argument("--compare", action="append", type=Path, default=[], metavar="DIR",
@@ -103,6 +106,7 @@ def cmd_campaign(args: argparse.Namespace, *, out: TextIO | None = None,
         requests=RequestPlan(fixed=fixed, draws=draws, per_trial=args.requests_per_trial),
         params=params, request_timeout=args.request_timeout, trial_timeout=args.trial_timeout,
         compare=list(args.compare), progress=progress, mcap=args.mcap,
+        answers=args.answers.resolve() if args.answers is not None else None,
     )
     if opts.ray is not None:
         import_ray(local=not opts.ray)

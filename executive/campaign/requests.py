@@ -61,6 +61,21 @@ def world_markers(cfg: Mapping[str, Any], mark: Mark) -> tuple[int, ...]:
     return item_markers(cfg.get(backend))
 
 
+def world_objects(cfg: Mapping[str, Any], mark: Mark) -> tuple[str, ...]:
+    """The names of the untagged objects of the world the config's backend runs in
+    (:attr:`~mmexec.drivers.backendspec.BackendSpec.object_names`); InputError at ``mark``
+    for a backend without them or a world with none."""
+    backend = str(cfg.get("backend", ""))
+    names = backend_spec(backend, mark).object_names
+    if names is None:
+        able = [spec.name for spec in specs(mark) if spec.object_names is not None]
+        raise InputError.at(mark, f"@objects needs a {' or '.join(able)} config (the untagged objects of its world)")
+    out = names(cfg.get(backend))
+    if not out:
+        raise InputError.at(mark, "@objects: the config's world has no untagged objects (docs/worlds.md, objects:)")
+    return out
+
+
 def parse_draws(tokens: Sequence[str], cfg: Mapping[str, Any]) -> dict[str, tuple[Any, ...]]:
     draws: dict[str, tuple[Any, ...]] = {}
     problems: list[Problem] = []
@@ -69,14 +84,14 @@ def parse_draws(tokens: Sequence[str], cfg: Mapping[str, Any]) -> dict[str, tupl
         key, sep, value = tok.partition("=")
         key = key.strip()
         if not sep or not key or not value.strip():
-            problems.append(Problem(mark, f"expected FIELD=V1,V2,... or FIELD=@markers, got {tok!r}"))
+            problems.append(Problem(mark, f"expected FIELD=V1,V2,..., FIELD=@markers or FIELD=@objects, got {tok!r}"))
             continue
         if key in draws:
             problems.append(Problem(mark, f"field {key!r} drawn twice"))
             continue
-        if value.strip() == "@markers":
+        if value.strip() in ("@markers", "@objects"):
             try:
-                draws[key] = world_markers(cfg, mark)
+                draws[key] = world_markers(cfg, mark) if value.strip() == "@markers" else world_objects(cfg, mark)
             except InputError as e:
                 problems.extend(e.problems)
             continue

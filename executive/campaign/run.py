@@ -56,6 +56,8 @@ class CampaignOptions:
     progress: bool | None = None
     #: record each trial as DIR/trials/NNNN.mcap too (``mmexec run --mcap``)
     mcap: bool = False
+    #: answers to the trials' operator prompts (``mmexec run --answers``; an absolute path)
+    answers: Path | None = None
 
 
 #: Settings that must match for a DIR to be resumed (the identity of its trials).
@@ -215,6 +217,8 @@ class Campaign:
             argv += ["--request-timeout", f"{o.request_timeout:g}"]
         if not o.recovery:
             argv.append("--no-recovery")
+        if o.answers is not None:
+            argv += ["--answers", str(o.answers)]
         log_path = self.trials_dir / f"{index:04d}.jsonl"
         # --overwrite: a resumed campaign runs an interrupted trial again into its own log
         argv += ["--log", str(log_path)]

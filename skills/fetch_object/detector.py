@@ -1,0 +1,137 @@
+"""The classical detector of the simulator's object set, and the detector a profile picks.
+
+:class:`PartsDetector` is an :class:`~mmexec.skills.perception.detector.ObjectDetector`
+for objects told by the colours of their parts (:data:`SIM_OBJECT_CLASSES`: the kinds of
+``sim/objects.py``, each a saturated colour, a two-part tool a second colour for its
+head or blade). Per class:
+
+1. the HSV mask of its main colour (OpenCV H 0-179), opened (speckle) and closed (the two
+   handles of a pair of pliers, 15 mm apart, become one blob);
+2. each blob of at least ``min_area`` pixels is a candidate; for a class with a second
+   part, the pixels of that part's colour within ``join_px`` of the blob join it (the
+   box then covers the whole tool);
+3. confidence: the blob's fill of its minimum-area rectangle (solid boxes, bars and
+   upright cylinders seen from the side fill it; clutter does not), times 1 when the
+   second part was found and 0.6 when a two-part class shows only its main colour
+   (a half-hidden tool still counts, with less trust).
+
+Lighting changes value and a little saturation but not hue, so the ranges hold under
+TinyRenderer's shading and the real lab's light alike; the floor, walls, wood and the
+orange crate have hues or saturations outside them.
+
+:func:`make_detector` builds the detector the profile's ``fetch_object.detector`` names:
+``colour`` (this one) or ``onnx`` (a YOLO model file the user supplies,
+:mod:`mmexec.skills.perception.yolo`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from mmexec.skills.perception.detector import Detection, HsvRange, ObjectDetector
+
+__all__ = ["SIM_OBJECT_CLASSES", "PartClass", "PartsDetector", "make_detector"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class PartClass:
+    """A class told by colour: ``main`` HSV ranges, and ``second`` ranges of a second part
+    (empty: one part)."""
+
+    name: str
+    main: tuple[HsvRange, ...]
+    second: tuple[HsvRange, ...] = ()
+
+
+#: The object kinds of the simulator (sim/objects.py) by their parts' colours.
+SIM_OBJECT_CLASSES: tuple[PartClass, ...] = (
+    PartClass("box", (((0, 150, 40), (5, 255, 255)), ((174, 150, 40), (179, 255, 255)))),
+    PartClass("cylinder", (((128, 120, 40), (145, 255, 255)),)),
+    PartClass("screwdriver", (((22, 150, 60), (32, 255, 255)),), (((85, 150, 40), (98, 255, 255)),)),
+    PartClass("pliers", (((155, 150, 40), (170, 255, 255)),), (((36, 150, 40), (48, 255, 255)),)),
+    PartClass("pen", (((55, 150, 30), (75, 255, 255)),)),
+)
+
+
+def _mask(hsv: np.ndarray, ranges: tuple[HsvRange, ...]) -> np.ndarray:
+    m = np.zeros(hsv.shape[:2], np.uint8)
+    for lo, hi in ranges:
+        m |= cv2.inRange(hsv, np.array(lo, np.uint8), np.array(hi, np.uint8))
+    return m
+
+
+@dataclass(frozen=True)
+class PartsDetector:
+    """The classical backend for the sim's object set (module doc). ``min_area`` [px] of a
+    main-colour blob; ``join_px``: how far [px] a second part may lie from the main blob;
+    ``close_px``: closing kernel [px]."""
+
+    classes_: tuple[PartClass, ...] = SIM_OBJECT_CLASSES
+    min_area: float = 40.0
+    join_px: int = 6
+    close_px: int = 5
+    kernels: dict[str, np.ndarray] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.classes_)
+
+    def detect(self, rgb: np.ndarray) -> list[Detection]:
+        """Objects of each class, most confident first (module doc)."""
+        img = np.asarray(rgb)
+        if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
+            raise ValueError(f"detect: need an HxWx3 uint8 RGB image, got {img.dtype} {img.shape}")
+        hsv = cv2.cvtColor(img, cv2.COLOR_RGB2HSV)
+        k_open = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3))
+        k_close = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (self.close_px, self.close_px))
+        k_join = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * self.join_px + 1, 2 * self.join_px + 1))
+        out: list[Detection] = []
+        for cls in self.classes_:
+            main = cv2.morphologyEx(cv2.morphologyEx(_mask(hsv, cls.main), cv2.MORPH_OPEN, k_open),
+                                    cv2.MORPH_CLOSE, k_close)
+            second = (cv2.morphologyEx(_mask(hsv, cls.second), cv2.MORPH_CLOSE, k_close)
+                      if cls.second else None)
+            n, labels, stats, _ = cv2.connectedComponentsWithStats(main, connectivity=8)
+            for i in range(1, n):
+                if stats[i, cv2.CC_STAT_AREA] < self.min_area:
+                    continue
+                blob = (labels == i).astype(np.uint8)
+                factor = 1.0
+                if second is not None:
+                    near = cv2.dilate(blob, k_join) & second
+                    if near.any():
+                        # the whole second-part blob that touches the main one
+                        _, lab2, _, _ = cv2.connectedComponentsWithStats(second, connectivity=8)
+                        for j in np.unique(lab2[near > 0]):
+                            if j:
+                                blob |= (lab2 == j).astype(np.uint8)
+                    else:
+                        factor = 0.6
+                pts = cv2.findNonZero(blob)
+                (_, _), (w, h), _ = cv2.minAreaRect(pts)
+                fill = float(blob.sum()) / max(w * h, 1.0)
+                conf = float(min(1.0, fill) * factor)
+                x, y, bw, bh = cv2.boundingRect(pts)
+                out.append(Detection(cls.name, conf, (int(x), int(y), int(bw), int(bh))))
+        out.sort(key=lambda d: -d.confidence)
+        log.debug("parts detector: %d objects", len(out))
+        return out
+
+
+def make_detector(backend: str, *, model: str = "", classes: tuple[str, ...] = (), layout: str = "auto",
+                  input_size: tuple[int, int] | None = None) -> ObjectDetector:
+    """The detector of a profile's ``fetch_object.detector``: ``colour`` (:class:`PartsDetector`)
+    or ``onnx`` (``model`` loaded by :func:`~mmexec.skills.perception.yolo.load_yolo`; raises
+    :class:`~mmexec.skills.perception.yolo.ModelError` naming the file when it cannot be used)."""
+    if backend == "colour":
+        return PartsDetector()
+    from mmexec.skills.perception.yolo import YoloConfig, load_yolo
+
+    return load_yolo(YoloConfig(model=model, classes=tuple(classes), layout=layout,  # type: ignore[arg-type]
+                                input_size=input_size))
