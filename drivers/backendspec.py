@@ -114,6 +114,9 @@ class BackendSpec(Generic[Parsed]):
     fault_patches: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     randomize_key: str | None = None
     item_markers: Callable[[Mapping[str, Any] | None], tuple[int, ...]] | None = None
+    #: the section key a campaign sets to ``truth/{seed}.jsonl`` (beside DIR/config.yaml) so
+    #: each trial writes its ground truth there for the campaign to count (None: no truth)
+    truth_key: str | None = None
     object_names: Callable[[Mapping[str, Any] | None], tuple[str, ...]] | None = None
 
     def __post_init__(self) -> None:

@@ -595,6 +595,7 @@ BACKEND: BackendSpec[SimSection] = BackendSpec(
     faults_off=FAULTS_OFF,
     fault_patches=FAULT_PATCHES,
     randomize_key="randomize",
+    truth_key="truth_log",
     item_markers=item_markers,
     object_names=object_names,
 )

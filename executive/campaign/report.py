@@ -98,9 +98,35 @@ def summarize(results: Sequence[TrialResult], identity: Mapping[str, Any] | None
         "errored_trials": [{"trial": r.index, "seed": r.seed, "reason": r.reason, "command": r.command}
                            for r in errors],
     }
+    panels = _panel_truth(results)
+    if panels:
+        out["panel_truth"] = panels
     if identity is not None:
         out["campaign"] = {k: v for k, v in identity.items() if k != "faults_patches"}
     return out
+
+
+def _panel_truth(results: Sequence[TrialResult]) -> dict[str, Any]:
+    """The control panels' ground truth over the trials that have one (sim/panel.py):
+    trials with every light on at the end, switched presses within the tolerance of their
+    button's centre, trials with both, and the press offsets [mm]."""
+    rows = [r.truth for r in results if r.truth.get("panel_lights")]
+    if not rows:
+        return {}
+    offsets = [p for t in rows for p in t["panel_presses"] if p is not None]
+    presses = sum(len(t["panel_presses"]) for t in rows)
+    all_on = [t["panel_lights_on"] == t["panel_lights"] for t in rows]
+    within = [t["presses_within"] == len(t["panel_presses"]) for t in rows]
+    return {
+        "trials": len(rows),
+        "all_lights_on": sum(all_on),
+        "presses": presses,
+        "presses_within_5mm": sum(t["presses_within"] for t in rows),
+        "trials_all_on_and_within": sum(a and w for a, w in zip(all_on, within)),
+        "offset_mm": {"median": statistics.median(offsets) if offsets else None,
+                      "p95": sorted(offsets)[min(len(offsets) - 1, math.ceil(0.95 * len(offsets)) - 1)] if offsets else None,
+                      "max": max(offsets) if offsets else None},
+    }
 
 
 def _cause(r: TrialResult) -> str:
@@ -221,6 +247,15 @@ def _report(identity: Mapping[str, Any], summary: Mapping[str, Any], results: Se
         "Recoveries used per trial: " + (", ".join(f"{k}: {v}" for k, v in summary["recoveries"].items()) or "-"),
         "",
     ]
+    pt = summary.get("panel_truth")
+    if pt:
+        o = pt["offset_mm"]
+        lines += ["## Control panel (ground truth)", "", "| measure | value |", "|---|---|",
+                  f"| trials with every light on at the end | {pt['all_lights_on']}/{pt['trials']} |",
+                  f"| switched presses within 5 mm of the button centre | {pt['presses_within_5mm']}/{pt['presses']} |",
+                  f"| trials with every light on and every press within 5 mm | {pt['trials_all_on_and_within']}/{pt['trials']} |",
+                  (f"| press offset from the centre, median / p95 / max | {_fmt(o['median'], ' mm')} / "
+                  f"{_fmt(o['p95'], ' mm')} / {_fmt(o['max'], ' mm')} |"), ""]
     if summary["failure_reasons"]:
         lines += ["## Failure reasons", "", "| trials | reason |", "|---:|---|"]
         lines += [f"| {n} | {reason.replace('|', '/')} |" for reason, n in summary["failure_reasons"].items()]

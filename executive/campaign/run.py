@@ -79,6 +79,19 @@ def _anchor_folders(cfg: dict[str, Any], loaded: LoadedConfig) -> dict[str, Any]
     return cfg
 
 
+#: where a trial's ground truth goes (relative to DIR/config.yaml), for a backend that writes one
+TRUTH_FILE = "truth/{seed}.jsonl"
+
+
+def _ask_for_truth(cfg: dict[str, Any], truth_key: str | None) -> None:
+    """Have each trial write its ground truth to DIR/:data:`TRUTH_FILE` (the backend's
+    ``truth_key``), unless the config names a file already, so the campaign can count
+    what really happened (:func:`~mmexec.executive.campaign.trial.read_truth`)."""
+    section = cfg.get(str(cfg.get("backend", "")))
+    if truth_key is not None and isinstance(section, dict) and section.get(truth_key) is None:
+        section[truth_key] = TRUTH_FILE
+
+
 def _dump_config(cfg: Mapping[str, Any], path: Path, header: str) -> None:
     import yaml  # writing only; all reading goes through mmexec.config.yamlload
 
@@ -127,6 +140,7 @@ class Campaign:
         load_skill_modules(loaded)  # a user module's problem is located in the user's config, not DIR/config.yaml
         profile = load_fault_profile(o.faults)
         cfg = _anchor_folders(apply_fault_profile(loaded.raw, profile, randomize=o.randomize), loaded)
+        _ask_for_truth(cfg, loaded.spec.truth_key)
         randomizes = loaded.spec.randomize_key is not None  # the backend draws its world per trial
         try:
             self.dir.mkdir(parents=True, exist_ok=True)

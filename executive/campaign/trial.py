@@ -5,14 +5,19 @@ and what it did (:class:`TrialResult`, read from its event log and exit status b
 from __future__ import annotations
 
 import dataclasses
+import json
 import os
 import shlex
 import signal
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
-__all__ = ["TrialResult", "TrialSpec", "parse_trial_log"]
+__all__ = ["TrialResult", "TrialSpec", "parse_trial_log", "read_truth"]
+
+#: [mm] a press counts as on the button within this distance of its centre
+PRESS_TOLERANCE_MM = 5.0
 
 
 @dataclass(frozen=True)
@@ -65,6 +70,8 @@ class TrialResult:
     command: str = ""
     log: str = ""
     host: str = ""
+    #: what the trial's ground truth says (:func:`read_truth`; empty without one)
+    truth: dict[str, Any] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -80,6 +87,35 @@ def _signal_name(rc: int) -> str:
         return signal.Signals(-rc).name
     except ValueError:
         return f"signal {-rc}"
+
+
+def read_truth(spec: TrialSpec) -> dict[str, Any]:
+    """The measures a campaign counts from the trial's ground-truth sidecar
+    (``DIR/truth/SEED.jsonl``, written by a backend with a ``truth_key``), or {} without
+    one. Control panels (sim/panel.py): ``panel_presses`` (each switched press's offset
+    from its button's centre [mm], None when no robot link touched it at the deepest
+    travel), ``panel_lights`` / ``panel_lights_on`` (lights at the end), ``presses_within``
+    (switched presses within :data:`PRESS_TOLERANCE_MM`)."""
+    path = Path(spec.log_path).parent.parent / "truth" / f"{spec.seed}.jsonl"
+    if not path.is_file():
+        return {}
+    presses: list[float | None] = []
+    lights: dict[str, bool] = {}
+    try:
+        for line in path.read_text().splitlines():
+            if '"panel_' not in line:
+                continue
+            rec = json.loads(line)
+            if rec.get("event") == "panel_press" and rec.get("switched"):
+                presses.append(rec.get("offset_mm"))
+            elif rec.get("event") == "panel_end":
+                lights.update(rec.get("lights", {}))
+    except (OSError, ValueError):
+        return {"truth_error": f"unreadable ground truth {path}"}
+    if not presses and not lights:
+        return {}
+    return {"panel_presses": presses, "panel_lights": len(lights), "panel_lights_on": sum(map(bool, lights.values())),
+            "presses_within": sum(1 for p in presses if p is not None and p <= PRESS_TOLERANCE_MM)}
 
 
 def parse_trial_log(spec: TrialSpec, *, exit_code: int | None, wall: float, note: str = "") -> TrialResult:
@@ -104,7 +140,7 @@ def parse_trial_log(spec: TrialSpec, *, exit_code: int | None, wall: float, note
     recoveries = sum(r["recoveries"] for r in rows)
     common = {"index": spec.index, "seed": spec.seed, "clock": clock, "wall": wall, "recoveries": recoveries,
               "exit_code": exit_code, "requests": rows, "command": spec.command, "log": spec.log_path,
-              "host": os.uname().nodename}
+              "host": os.uname().nodename, "truth": read_truth(spec)}
     if run_end is not None and run_end.get("outcome") == "interrupted":
         return TrialResult(outcome="interrupted", reason="interrupted (Ctrl-C)", **common)
     crashed = run_end is None or run_end.get("outcome") == "error" or exit_code not in (0, 1)

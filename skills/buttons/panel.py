@@ -330,6 +330,19 @@ def _panel_in_scene(ws: ArmWorkspace, s: ButtonsSettings, T_am: np.ndarray, T_ma
     ws.scene.add_item("panel", (w + 2 * grow, h + 2 * grow, d + 2 * grow), T_am @ box)
 
 
+def _nearest_turns(q: np.ndarray, near: Sequence[float], limits: Sequence[Any]) -> list[float]:
+    """``q`` with each joint moved by whole turns (within its limits) as close as it gets
+    to ``near``: the same pose, without a needless swing of a joint that turns +-2 pi."""
+    out = []
+    for v, n, lim in zip(q, near, limits):
+        k = round((n - v) / (2 * math.pi))
+        for cand in (v + 2 * math.pi * k, v):
+            if lim.lower - 1e-9 <= cand <= lim.upper + 1e-9:
+                out.append(float(cand))
+                break
+    return out
+
+
 def _plan_pose(ctx: SkillContext, ws: ArmWorkspace, planner: ArmPlanner, T_map_tool: np.ndarray, what: str,
                panel: tuple[np.ndarray, float]) -> Generator[None, None, PlanResult]:
     """Plan to a tool pose in map, the panel (``(T_map_panel, grow)``) in the scene."""
@@ -341,7 +354,14 @@ def _plan_pose(ctx: SkillContext, ws: ArmWorkspace, planner: ArmPlanner, T_map_t
     def job() -> PlanResult:
         ws.scene.set_static_boxes(boxes, T_am)
         _panel_in_scene(ws, s, T_am, *panel)
-        return planner.plan_to_pose(q, T, ik_seeds=seeds, ik_attempts=40, config=cfg)
+        goal = None
+        for k, seed in enumerate([*seeds, q]):
+            goal = planner.kin.ik(T, seed, attempts=1 if k < len(seeds) else 40, is_valid=ws.scene.is_valid)
+            if goal is not None or planner.stop.is_set():
+                break
+        if goal is None:
+            return planner.plan_to_pose(q, T, ik_seeds=seeds, ik_attempts=40, config=cfg)  # says why
+        return planner.plan(q, _nearest_turns(goal, q, planner.kin.limits), cfg)
 
     return planned(ctx, (yield from off_tick(ctx, ws, job)), what)
 
