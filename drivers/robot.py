@@ -11,11 +11,14 @@ Section schema (every device optional; see docs/drivers/bringup.md)::
       gripper: {kind: wx250s_gripper}                         # the arm's own gripper servo
                # or {kind: robotiq_rtu, port: /dev/ttyUSB0, slave: 9, max_force: 100, activate: true}
                # or {kind: robotiq_urcap, host: 192.168.1.10, ...}
+      head:    {kind: wx250s_head, home: [pan, tilt]}         # the LoCoBot's pan/tilt servos 10, 11 on the
+                                                              # arm's bus (arm locobot: true); home [rad]
       camera:  {kind: uvc | realsense, device: 0, width: 640, height: 480, fps: 30,
                 intrinsics: {fx, fy, cx, cy, dist} | hfov: RAD, frame_timeout: 0.5,
-                pose_in_base: {xyz: [..], rpy: [..]}, mount_link: base_link | tool0}
+                pose_in_base: {xyz: [..], rpy: [..]}, mount_link: base_link | tool0 | head}
                # ...CameraConfig keys (docs/drivers/camera.md); mount_link tool0 = wrist
-               # camera on a UR arm, pose_in_base then being T_tool0_camera
+               # camera on a UR arm, pose_in_base then being T_tool0_camera; head = on the
+               # pan/tilt head, pose_in_base then being the pose at pan = tilt = 0
       lidar:   {kind: rplidar, port: /dev/rplidar, pose_in_base: {xyz: [..], rpy: [..]},
                 ...RplidarConfig keys}                        # pose of the CCW scan frame
       map:     {yaml: maps/lab.yaml}                           # map_server YAML + PGM
@@ -24,7 +27,7 @@ Section schema (every device optional; see docs/drivers/bringup.md)::
 Two phases, as everywhere in mmexec: the whole section is bound and checked first
 (every problem reported as ``FILE:LINE:COL: robot.key: message``), then devices are
 constructed lazily by ``kind`` through :data:`DEVICE_KINDS` (driver modules are
-imported only when a config names them) and connected in order base, arm, gripper,
+imported only when a config names them) and connected in order base, arm, gripper, head,
 camera, lidar. Before the first device is opened, the driver objects that need an optional
 extra are constructed (no I/O), so a missing ``pyrealsense2`` fails at once. A device that
 does not answer raises :class:`DeviceUnavailable`, a one-line error naming the config
@@ -151,8 +154,8 @@ class RealRobot(Robot):
         time.sleep(delay)
 
     def safe_stop(self) -> None:
-        """Base zero velocity, arm holding; gripper unchanged. Never raises."""
-        for label, cap in (("base", self.base), ("arm", self.arm)):
+        """Base zero velocity, arm and head holding; gripper unchanged. Never raises."""
+        for label, cap in (("base", self.base), ("arm", self.arm), ("head", self.head)):
             if cap is None:
                 continue
             try:
@@ -344,6 +347,41 @@ def _wx250s_gripper(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
     return ("gripper", "wx250s gripper", section.mark, lambda: mod.WX250sGripper(device))
 
 
+@dataclass(frozen=True)
+class _HeadSection:
+    """``head: {kind: wx250s_head}`` keys: ``home`` [pan, tilt] [rad], the robot's default
+    head pose (skills that move the head return to it; the head is not moved at bring-up)."""
+
+    home: tuple[float, float] = (0.0, 0.0)
+
+
+def _wx250s_head(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
+    """The LoCoBot's pan/tilt head: servos 10 and 11 of the ``wx250s`` arm's bus."""
+    ctx.devices["head"] = None  # planned; a camera on it reports nothing more when this has problems
+    cfg = bind(_HeadSection, _without(section, "kind"), section.mark, path, ctx.problems)
+    if cfg is None:
+        return None
+    if "arm" not in ctx.devices:
+        ctx.problems.add(section.value_mark("kind"),
+                         f"{path}.kind: 'wx250s_head' needs 'arm: {{kind: wx250s, locobot: true}}'")
+        return None
+    device = ctx.devices["arm"]
+    if device is None:
+        return None  # the arm section's problems are reported there
+    head = device.head
+    if head is None:
+        ctx.problems.add(section.value_mark("kind"),
+                         f"{path}.kind: 'wx250s_head' needs 'locobot: true' in the arm section (servos 10, 11)")
+        return None
+    problem = head.limit_problem(*cfg.home)
+    if problem:
+        ctx.problems.add(section.value_mark("home") if "home" in section else section.mark, f"{path}.home: {problem}")
+        return None
+    head.home = cfg.home
+    ctx.devices["head"] = head
+    return ("head", f"wx250s head (servos 10, 11) on {device.config.port}", section.mark, lambda: head)
+
+
 def _robotiq(section: YDict, path: str, ctx: _Ctx, *, kind: str) -> _Plan | None:
     """``robotiq_rtu`` (Modbus RTU on a serial port) or ``robotiq_urcap`` (UR socket)."""
     mark = section.value_mark("kind")
@@ -410,13 +448,16 @@ def _ur(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
 @dataclass(frozen=True)
 class _MountLink:
     """Camera key next to the :class:`CameraConfig` ones: the link ``pose_in_base`` is
-    relative to: ``base_link`` (fixed on the robot) or ``tool0`` (a wrist camera riding on
-    the arm's flange; ``pose_in_base`` is then the hand-eye calibration ``T_tool0_camera``)."""
+    relative to: ``base_link`` (fixed on the robot), ``tool0`` (a wrist camera riding on
+    the arm's flange; ``pose_in_base`` is then the hand-eye calibration ``T_tool0_camera``)
+    or ``head`` (on the pan/tilt head: ``pose_in_base`` is the optical frame in
+    ``base_link`` at pan = tilt = 0, moved with the head's measured joints through the
+    description's head chain)."""
 
     mount_link: str = "base_link"
 
 
-_MOUNT_LINKS = ("base_link", "tool0")
+_MOUNT_LINKS = ("base_link", "tool0", "head")
 
 
 def _camera(section: YDict, path: str, ctx: _Ctx, *, kind: str) -> _Plan | None:
@@ -447,6 +488,12 @@ def _camera(section: YDict, path: str, ctx: _Ctx, *, kind: str) -> _Plan | None:
                              f"{path}.mount_link: 'tool0' needs 'arm: {{kind: ur}}' (the arm carrying the camera)")
         else:
             link_pose = functools.partial(_ur_tool0_in_base, ctx.robot, ctx.devices["ur_model"])
+    elif link.mount_link == "head":
+        if "head" not in ctx.devices:
+            ctx.problems.add(link_part.value_mark("mount_link"),
+                             f"{path}.mount_link: 'head' needs 'head: {{kind: wx250s_head}}' (the head carrying the camera)")
+        elif ctx.devices["head"] is not None:  # else the head section's problems are reported
+            link_pose = functools.partial(_head_motion, ctx.robot, ctx.devices["head"].kinematics)
     if len(ctx.problems) > before:
         return None
     robot = ctx.robot
@@ -493,6 +540,16 @@ def _ur_tool0_in_base(robot: RealRobot, model: str) -> np.ndarray:
         raise CapabilityError("the arm carrying the camera is not connected")
     q = arm.state().positions
     return arm.mount @ urmodel.T_BASELINK_BASE @ urmodel.forward_kinematics(q, model)
+
+
+def _head_motion(robot: RealRobot, model: Any) -> np.ndarray:
+    """How far the head's measured joints move the camera from its pan = tilt = 0 pose:
+    ``T(pan, tilt) @ inv(T(0, 0))`` of the camera link (:meth:`HeadModel.motion`)."""
+    head = robot.head
+    if head is None:
+        raise CapabilityError("the head carrying the camera is not connected")
+    st = head.state()
+    return model.motion(st.pan, st.tilt)  # type: ignore[no-any-return]
 
 
 @dataclass(frozen=True)
@@ -545,6 +602,7 @@ def _rplidar(section: YDict, path: str, ctx: _Ctx) -> _Plan | None:
 DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
     "base": {"kobuki": _kobuki},
     "arm": {"wx250s": _wx250s, "ur": _ur},
+    "head": {"wx250s_head": _wx250s_head},
     "gripper": {
         "wx250s_gripper": _wx250s_gripper,
         "robotiq_rtu": functools.partial(_robotiq, kind="robotiq_rtu"),
@@ -557,7 +615,7 @@ DEVICE_KINDS: dict[str, dict[str, _Factory]] = {
     "lidar": {"rplidar": _rplidar},
 }
 
-_TOP_KEYS = ("name", "description", "base", "arm", "gripper", "camera", "lidar", "map", "scene")
+_TOP_KEYS = ("name", "description", "base", "arm", "gripper", "head", "camera", "lidar", "map", "scene")
 
 
 # --------------------------------------------------------------------------- build
@@ -665,7 +723,7 @@ def _plan(section: YDict | None, profile: Mapping[str, Any]) -> tuple[RealRobot,
     robot.description = _description(section, problems)
     ctx = _Ctx(robot, problems)
     plans: list[_Plan] = []
-    for slot in ("base", "arm", "gripper", "camera", "lidar"):
+    for slot in ("base", "arm", "gripper", "head", "camera", "lidar"):
         if slot not in section:
             continue
         sub, path = section[slot], f"robot.{slot}"
@@ -751,7 +809,8 @@ def _parse(section: YDict | None) -> list[_Plan]:
 
 
 def _capabilities(plans: list[_Plan]) -> frozenset[str]:
-    """The capability slots the planned devices fill."""
+    """The capability slots the planned devices fill (``head`` too, beyond
+    :data:`~mmexec.drivers.backendspec.CAPABILITIES`)."""
     return frozenset(slot for slot, _label, _mark, _connect in plans)
 
 

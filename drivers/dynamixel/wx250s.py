@@ -25,7 +25,8 @@ address 126 (current/load, velocity, position) for the joint ids, then advances 
 
 Every register is read and written by name at the address and size of the servo's own
 model (:mod:`.control_table`); the Arm/Gripper capability adapters the device hands out
-(:attr:`WX250s.arm`, :attr:`WX250s.gripper`) live in :mod:`.arm`.
+(:attr:`WX250s.arm`, :attr:`WX250s.gripper`) live in :mod:`.arm`, the LoCoBot's pan/tilt
+Head (:attr:`WX250s.head`, with ``locobot``) in :mod:`.head`.
 
 Positions are radians with 2048 pulses = 0 rad, velocities rad/s, efforts in amperes (XM
 servos) or fraction of maximum torque (XL430); the gripper width is metres between the
@@ -79,6 +80,7 @@ from mmexec.drivers.dynamixel.control_table import (
     rad_to_pulses,
     velocity_to_rad_s,
 )
+from mmexec.drivers.dynamixel.head import WX250sHead
 from mmexec.drivers.dynamixel.model import (
     ARM_JOINTS,
     FINGER_MAX,
@@ -449,6 +451,7 @@ class WX250s:
         self.watchdog_trips = 0
         self._arm = WX250sArm(self)
         self._gripper = WX250sGripper(self)
+        self._head = WX250sHead(self) if config.locobot else None
 
     # -- capabilities
     @property
@@ -458,6 +461,11 @@ class WX250s:
     @property
     def gripper(self) -> WX250sGripper:
         return self._gripper
+
+    @property
+    def head(self) -> WX250sHead | None:
+        """The LoCoBot's pan/tilt head (None without ``locobot``)."""
+        return self._head
 
     @property
     def connected(self) -> bool:
@@ -952,18 +960,23 @@ class WX250s:
                 g.mark_cancelled(reason)
             else:
                 g.fail(reason)
+        if self._head is not None:
+            self._head._finish(reason, cancelled=cancelled)
         if reqs:
             log.debug("%d pending requests dropped: %s", len(reqs), reason)
 
-    def _hold_present(self) -> None:
-        """Goal = present position for every position joint (last reading)."""
+    def _hold_present(self, joints: Sequence[JointSpec] | None = None) -> None:
+        """Goal = present position (last reading) for ``joints`` (default: every position
+        joint); the others keep their goals."""
         assert self._io is not None
         with self._lock:
-            goals = []
+            goals = list(self._goals_pulses)
             for k, j in enumerate(self.position_joints):
+                if joints is not None and j not in joints:
+                    continue
                 r = self._readings.get(j.id)
                 p = r.raw_position if r is not None else self._goals_pulses[k]
-                goals.append(min(max(p, j.min_pulses), j.max_pulses))
+                goals[k] = min(max(p, j.min_pulses), j.max_pulses)
             self._goals_pulses = goals
         self._io.write_goals(goals)
         self._sent_goals = list(goals)
@@ -1005,6 +1018,8 @@ class WX250s:
             self._on_alerts(alerts)
         self._check_trajectory_done(self.clock.now())
         self._check_gripper(self.clock.now())
+        if self._head is not None:
+            self._head._on_cycle(self.clock.now())
 
     def _fail_running(self, reason: str) -> None:
         with self._lock:
@@ -1012,6 +1027,8 @@ class WX250s:
             self._traj = self._grip = None
         for g in runs:
             g.fail(reason)
+        if self._head is not None:
+            self._head._finish(reason)
         if runs:
             self._hold_present()
 
@@ -1042,7 +1059,7 @@ class WX250s:
         if run.goal.state is GoalState.CANCELLING:
             with self._lock:
                 self._traj = None
-            self._hold_present()
+            self._hold_present(self.joints)  # the arm's joints: a moving head goes on
             run.goal.mark_cancelled("cancelled: holding position")
             return
         t = now - run.start
@@ -1076,7 +1093,7 @@ class WX250s:
         elif t > run.traj.duration + self.config.settle_timeout:
             with self._lock:
                 self._traj = None
-            self._hold_present()
+            self._hold_present(self.joints)
             run.goal.fail(
                 f"did not reach the last waypoint within {self.config.settle_timeout:.2f} s: "
                 f"{self.joints[worst].name} off by {errs[worst]:.3f} rad"

@@ -180,6 +180,8 @@ class FakeServo:
         self.position_at_last_instruction = self.pos
         #: times the Bus Watchdog fired, and the position [pulses] each time it did
         self.watchdog_fires: list[tuple[float, float]] = []
+        #: every Goal Position [pulses] this servo accepted, in order (bounded)
+        self.goal_log: list[int] = []
         self.registered: tuple[int, bytes] | None = None
         self._store_motion()
 
@@ -383,11 +385,11 @@ class FakeServo:
         if not torque_before and self.torque:
             # torque on: hold where it is unless a goal is written in the same packet
             self.hold(now)
-        if (
-            self.model.reg("goal_position").address in range(address, address + len(data))
-            and self.torque
-        ):
-            self._start_move(self.get("goal_position"), now)
+        if self.model.reg("goal_position").address in range(address, address + len(data)):
+            if len(self.goal_log) < 10000:
+                self.goal_log.append(self.get("goal_position"))
+            if self.torque:
+                self._start_move(self.get("goal_position"), now)
         return 0
 
     def touch(self, now: float) -> None:

@@ -193,7 +193,7 @@ def test_shipped_locobot_config_is_valid() -> None:
     assert loaded.config.profile["named_poses"]["sleep"] == [0.0, -1.1, 1.55, 0.0, 0.5, 0.0]
     assert rb.check(loaded.section(), profile=loaded.config.profile) == [
         "base: kobuki on /dev/kobuki", "arm: wx250s on /dev/ttyDXL", "gripper: wx250s gripper",
-        "camera: realsense 0", "lidar: rplidar on /dev/rplidar",
+        "head: wx250s head (servos 10, 11) on /dev/ttyDXL", "camera: realsense 0", "lidar: rplidar on /dev/rplidar",
     ]
 
 

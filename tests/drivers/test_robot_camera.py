@@ -221,7 +221,7 @@ def _shipped_camera(name: str) -> tuple[CameraConfig, str]:
 
 def test_shipped_locobot_camera_is_the_d435_at_pan_tilt_zero() -> None:
     cam, link = _shipped_camera("locobot.yaml")
-    assert link == "base_link" and (cam.width, cam.height) == (640, 480)
+    assert link == "head" and (cam.width, cam.height) == (640, 480)  # the pose at pan = tilt = 0, moved by the head
     intr = cam.camera_intrinsics()
     assert intr is not None and intr.fx == pytest.approx(589.367, abs=1e-3) and intr.fx == intr.fy
     # docs/robots.md 1.2: camera_depth_link in base_footprint, quat (x, y, z, w) = (-0.5, 0.5, -0.5, 0.5)

@@ -82,7 +82,8 @@ def test_section_plans_every_device_and_loads_the_lab_map_and_scene(repo_root: P
     section = loaded.section()
     devices = robot_backend.check(section, profile=loaded.config.profile)   # opens nothing
     lidar = ["lidar"] if config == "config/locobot.yaml" else []   # the LoCoBot's RPLIDAR
-    assert [d.split(":")[0] for d in devices] == ["base", "arm", "gripper", "camera", *lidar]
+    head = ["head"] if config == "config/locobot.yaml" else []     # and its pan/tilt head
+    assert [d.split(":")[0] for d in devices] == ["base", "arm", "gripper", *head, "camera", *lidar]
     assert section["map"]["yaml"] == "maps/lab.yaml"   # relative to the config file
     robot = robot_backend.build(_map_and_scene_only(section), profile=loaded.config.profile, seed=None, options={})
     try:
