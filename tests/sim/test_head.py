@@ -142,3 +142,45 @@ def test_a_robot_without_a_head_has_none(sim_section, bench_world):
         r.safe_stop()
     finally:
         r.close()
+
+
+class ArucoBoxes:
+    """An ObjectDetector for the sim's marker boxes: label ``marker<id>``, the marker's
+    bounding box, confidence 0.9 (detection on the rendered image)."""
+
+    classes = (f"marker{MARKER}",)
+
+    def detect(self, rgb: np.ndarray) -> list:
+        from mmexec.skills.perception.detector import Detection
+
+        det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+        corners, ids, _ = det.detectMarkers(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
+        out = []
+        for c, i in zip(corners, np.ravel(ids) if ids is not None else []):
+            x, y, w, h = cv2.boundingRect(c.reshape(4, 2).astype(np.float32))
+            out.append(Detection(f"marker{int(i)}", 0.9, (int(x), int(y), int(w), int(h))))
+        return out
+
+
+@pytest.mark.slow
+def test_the_scan_skill_on_the_sim_head_finds_the_box_where_it_is(robot):
+    from mmexec.skills.base import SkillContext, SkillStatus, run_skill
+    from mmexec.skills.perception.scan import WORLD_OBJECT_DETECTOR, WORLD_SCAN, scan
+
+    point(robot, *robot.head.home)
+    robot.profile = {"scan": {"head_poses": [[0.35, 0.1], [0.1, 0.1], [-0.1, 0.1], [-0.35, 0.1]]}}
+    ctx = SkillContext.for_robot(robot)
+    ctx.world[WORLD_OBJECT_DETECTOR] = ArucoBoxes()
+    run = run_skill(scan.spec, ctx, {"label": f"marker{MARKER}", "size": [0.14, 0.14, 0.14]},
+                    step=lambda: robot.spin(0.05))
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    obj = run.outputs["object"]
+    assert run.outputs["views"] == 4 and run.outputs["predictions"] == 8
+    assert obj["seen"] >= 4 and obj["spread"] < 0.02  # seen from several head poses, at one place
+    truth = robot.truth.item_pose("big")[:3, 3]
+    # the marker's box covers the face only: its centre of mass, completed with the size
+    assert np.linalg.norm(np.array(obj["position"])[:2] - truth[:2]) < 0.03, (obj, truth)
+    views = {p.view for p in ctx.world[WORLD_SCAN].objects[0].predictions}
+    assert len(views) >= 2
+    st = robot.head.state()
+    assert (st.pan, st.tilt) == pytest.approx(robot.head.home, abs=robot.head.tolerance)
