@@ -90,6 +90,7 @@ __all__ = [
     "fuse",
     "locate",
     "object_detector",
+    "point_head",
     "scan",
     "scan_place",
     "scan_settings",
@@ -408,3 +409,28 @@ def scan(ctx: SkillContext, label: str | None = None, size: list[float] | None =
                            f"scan: no {label!r} seen in {result.predictions} predictions from {result.views} views")
     return {"objects": [o.as_dict() for o in result.objects], "object": best.as_dict() if best is not None else None,
             "views": result.views, "predictions": result.predictions}
+
+
+@skill(
+    "point_head",
+    params=[
+        Param("pan", float, unit="rad", doc="pan, positive turns the camera left (default: the head's home)"),
+        Param("tilt", float, unit="rad", doc="tilt, positive looks down (default: the head's home)"),
+        Param("timeout", float, unit="s", default=10.0, doc="give up after this much clock time"),
+    ],
+    outputs=[Output("pan", float, doc="measured pan [rad]"), Output("tilt", float, doc="measured tilt [rad]")],
+)
+def point_head(ctx: SkillContext, pan: float | None = None, tilt: float | None = None,
+               timeout: float = 10.0) -> SkillGen:
+    """Point the pan/tilt head: move to ``pan`` and ``tilt`` [rad] (each defaults to the
+    head's home value), e.g. the sim's 20 degree tilt (0.35) before a marker search on the
+    real LoCoBot. PRECONDITION on a robot without a head; EXECUTION when the head refuses
+    (a target outside its limits) or fails."""
+    head = ctx.robot.head
+    if head is None:
+        raise SkillFailure(FailureKind.PRECONDITION, "point_head needs a pan/tilt head, and this robot has none")
+    home_pan, home_tilt = head.home
+    yield from wait_goal(ctx, head.point(home_pan if pan is None else pan, home_tilt if tilt is None else tilt),
+                         timeout=timeout)
+    st = head.state()
+    return {"pan": st.pan, "tilt": st.tilt}

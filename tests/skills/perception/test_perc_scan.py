@@ -204,3 +204,16 @@ def test_fuse_groups_by_class_and_distance() -> None:
     assert pen.spread == pytest.approx(math.hypot(0.0333333, 0.02), abs=1e-4)
     # a tighter radius splits the near pens
     assert len(fuse(preds, merge_distance=0.03)) > len(objs)
+
+
+def test_point_head_moves_and_refuses(robot: MockRobot, ctx: SkillContext) -> None:
+    from mmexec.skills.perception.scan import point_head
+
+    run = run_skill(point_head.spec, ctx, {"tilt": 0.35}, step=lambda: robot.spin(0.05))
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    assert (run.outputs["pan"], run.outputs["tilt"]) == pytest.approx((0.0, 0.35))
+    run = run_skill(point_head.spec, ctx, {"pan": 2.0}, step=lambda: robot.spin(0.05))
+    assert run.status is SkillStatus.FAILURE and "pan = 2.0000 rad outside its limits" in run.failure.reason
+    headless = SkillContext.for_robot(MockRobot(capabilities={"camera"}))
+    run = run_skill(point_head.spec, headless, {}, step=lambda: None)
+    assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.PRECONDITION
