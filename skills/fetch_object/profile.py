@@ -54,10 +54,13 @@ class GraspSettings:
     pre_grasp: tuple[float, float, float] = setting((0.0, 0.0, 0.10), unit="m", doc="pre-grasp offset, grasp frame")
     retract: tuple[float, float, float] = setting((0.0, 0.0, 0.12), unit="m", doc="retreat after the grasp, grasp frame")
     grasp_height: float = setting(0.0, unit="m", doc="every pick pose moved this far along the grasp frame's y")
+    depth: float = setting(0.0, unit="m", doc=(
+        "the grasp point moved this far into the object along the grasp frame's -z (negative: back out; for a top "
+        "grasp, up: the finger tips then stay clear of the support under a flat object)"))
 
 
 def _top() -> GraspSettings:
-    return GraspSettings()
+    return GraspSettings(depth=-0.01)
 
 
 def _front() -> GraspSettings:

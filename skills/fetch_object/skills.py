@@ -508,7 +508,7 @@ def _pick_steps(ctx: SkillContext, t: ObjectTarget, algorithm: str | None, time_
     T_box, size = _object_box(t)
     T_item = T_am @ T_box
     poses = grasp_poses(T_am @ _grasp_frame(t, mode), ws.kin.approach_axis, pre_grasp=gs.pre_grasp,
-                        retract=gs.retract, grasp_height=gs.grasp_height)
+                        retract=gs.retract, grasp_height=gs.grasp_height, grasp_depth=gs.depth)
     q, seeds, boxes = measured_joints(ctx), ik_seeds(ctx, ws, poses.pre_grasp), ctx.robot.scene
     ctx.emit("object_grasp", item=t.item.name, mode=mode, centre=[round(float(v), 4) for v in t.grasp.centre],
              width=round(t.grasp.top_width if mode == "top" else t.grasp.front_width, 4), node=ctx.node_path)
