@@ -184,3 +184,37 @@ def test_the_scan_skill_on_the_sim_head_finds_the_box_where_it_is(robot):
     assert len(views) >= 2
     st = robot.head.state()
     assert (st.pan, st.tilt) == pytest.approx(robot.head.home, abs=robot.head.tolerance)
+
+
+@pytest.mark.slow
+def test_without_a_head_the_scan_moves_the_wrist_camera_through_the_arm(sim_section, bench_world, repo_root):
+    """The UR5e (wrist camera, no head): four named arm poses from the profile, planned
+    and executed like any named move; the box found where it is."""
+    from mmexec.executive.config import load_config
+    from mmexec.skills.base import SkillContext, SkillStatus, run_skill
+    from mmexec.skills.perception.scan import WORLD_OBJECT_DETECTOR, scan
+
+    profile = dict(load_config(repo_root / "config" / "ur5e_sim.yaml").config.profile)
+    look = list(profile["named_poses"]["look"])
+    poses = dict(profile["named_poses"])
+    for name, pan in (("scan_l2", 0.4), ("scan_l1", 0.15), ("scan_r1", -0.15), ("scan_r2", -0.4)):
+        poses[name] = [pan, *look[1:]]
+    profile["named_poses"] = poses
+    profile["scan"] = {"arm_poses": ["scan_l2", "scan_l1", "scan_r1", "scan_r2"]}
+    r = build(sim_section(f"robot: ur5e_robotiq\nworld: {bench_world}\nphysics_hz: 120\n"
+                          "camera: {width: 512, height: 384}\nodometry_noise: {linear: 0.0, angular: 0.0}\n"),
+              profile=profile, seed=0, options={})
+    try:
+        assert r.head is None
+        ctx = SkillContext.for_robot(r)
+        ctx.world[WORLD_OBJECT_DETECTOR] = ArucoBoxes()
+        run = run_skill(scan.spec, ctx, {"label": f"marker{MARKER}", "size": [0.14, 0.14, 0.14]},
+                        step=lambda: r.spin(0.05))
+        assert run.status is SkillStatus.SUCCESS, run.failure
+        obj = run.outputs["object"]
+        assert run.outputs["views"] == 4 and obj["seen"] >= 2
+        assert r.arm.state().positions[0] == pytest.approx(-0.4, abs=0.02)  # the arm stays at the last pose
+        truth = r.truth.item_pose("big")[:3, 3]
+        assert np.linalg.norm(np.array(obj["position"])[:2] - truth[:2]) < 0.03, (obj, truth)
+    finally:
+        r.close()
