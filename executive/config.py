@@ -91,6 +91,7 @@ BUILTIN_SKILL_MODULES: tuple[str, ...] = (
     "mmexec.skills.manipulation.arm", "mmexec.skills.fetch",
     "mmexec.skills.buttons",
     "mmexec.skills.manipulation.holistic_skill",
+    "mmexec.skills.fruit",
 )
 
 

@@ -65,6 +65,7 @@ from mmexec.sim.capabilities import (
 from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultConfig, FaultInjector, world_extras
 from mmexec.sim.people import SimPeople
+from mmexec.sim.plant import RobotBasket
 from mmexec.sim.recording import Recorder
 from mmexec.sim.scene import (
     GROUP_ARM,
@@ -183,6 +184,7 @@ class SimSection:
     faults: FaultConfig = field(default_factory=FaultConfig)
     randomize: bool = False
     truth_log: str | None = None
+    basket: RobotBasket | None = None  #: a basket on the robot (sim/plant.py; the fruit mission drops into it)
 
     def validate(self) -> list[str]:
         return [] if 30 <= self.physics_hz <= 2000 else [f"physics_hz {self.physics_hz} outside 30..2000"]
@@ -326,6 +328,8 @@ class SimRobot(Robot):
         self.head: SimHead | None = None
         core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
         self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}
+        if scene_handles.plants is not None:  # the fruit are items too (the gripper holds them)
+            self._item_radius.update({n: f.radius for n, f in scene_handles.plants.fruit.items()})
         self._item_radius.update({o.name: 0.5 * math.sqrt(sum(x * x for x in o.model.size)) for o in world.spec.objects})
         self.physics_steps = 0  #: substeps that ran stepSimulation (the others were at rest)
         self.truth_log: TruthLog | None = None  #: SIM-ONLY ground-truth sidecar (``sim.truth_log``)
@@ -399,6 +403,8 @@ class SimRobot(Robot):
                 self.recorder.sample(self.clock.now(), (tp.x, tp.y), tp.theta)
                 if self.head is not None:
                     self.head.update(dt)
+        if self.scene_handles.plants is not None:  # magnets pulled off let go; fruit truth
+            self.scene_handles.plants.tick(self.clock.now(), core.held_body, self.truth_log)
         if self.truth_log is not None:
             self.truth_log.sample()
 
@@ -477,7 +483,7 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
         p.setGravity(0, 0, -9.81, physicsClientId=cid)
         p.setTimeStep(1.0 / cfg.physics_hz, physicsClientId=cid)
         p.setPhysicsEngineParameter(numSolverIterations=30, deterministicOverlappingPairs=1, physicsClientId=cid)
-        handles = spawn_world(world, cid, marker_bias=cfg.faults.marker_bias)
+        handles = spawn_world(world, cid, marker_bias=cfg.faults.marker_bias, robot_basket=cfg.basket)
         description = descriptions.get(cfg.robot)
         info = description.info
         body = p.loadURDF(str(description.urdf_path), [world.start.x, world.start.y, 0.0],
@@ -520,6 +526,8 @@ def build(section: YDict | None, *, profile: Mapping[str, Any], seed: int | None
                                                  frozenset(i for i, arm in on_arm.items() if arm and i >= 0))
             except OSError as e:
                 raise SimError(f"sim.truth_log {truth_path}: cannot write: {e.strerror or e}") from e
+            if handles.plants is not None:
+                robot.truth_log.record("fruit_start", **handles.plants.start_record())
         return robot
     except BaseException:
         p.disconnect(physicsClientId=cid)

@@ -139,6 +139,8 @@ class SimCore:
                 ipos, iorn = p.getBasePositionAndOrientation(self.held_body, physicsClientId=self.cid)
                 T = step @ _mat(ipos, iorn)
                 p.resetBasePositionAndOrientation(self.held_body, *position_quat(T), physicsClientId=self.cid)
+            if self.scene.plants is not None:  # the basket on the robot, and the fruit in it
+                self.scene.plants.carry(pose.matrix(), self.held_body)
             self._placed = pose
 
     def link_T(self, name: str) -> np.ndarray:

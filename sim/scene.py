@@ -20,6 +20,7 @@ from mmexec.drivers.geometry import position_quat
 from mmexec.sim.markers import QUIET_RATIO, marker_texture_path
 from mmexec.sim.objects import spawn_objects
 from mmexec.sim.panel import HOUSING_COLOR, SimPanels
+from mmexec.sim.plant import PlantSim, RobotBasket, spawn_plants
 from mmexec.sim.world import World
 
 __all__ = [
@@ -51,6 +52,7 @@ _COLORS = {
     "depot": (0.2, 0.5, 0.8, 1.0),
     "obstacle": (0.8, 0.45, 0.2, 1.0),
     "reflector": (0.95, 0.95, 0.95, 1.0),
+    "plant": (0.45, 0.32, 0.2, 1.0),
     "panel": HOUSING_COLOR,
 }
 
@@ -65,6 +67,7 @@ class SceneHandles:
     static_names: tuple[str, ...]
     floor: int
     items: Mapping[str, int]
+    plants: PlantSim | None = None  #: the plants' fruit (also in items) and the robot's basket (sim/plant.py)
     panels: SimPanels | None = None  #: the control panels' caps, lights and markers (sim/panel.py)
 
 
@@ -91,14 +94,15 @@ def _floor_visual(cid: int, sx: float, sy: float, tile: float = 0.5) -> int:
 
 
 def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float, float]] | None = None,
-                texture_dir: Path | None = None) -> SceneHandles:
+                texture_dir: Path | None = None, robot_basket: RobotBasket | None = None) -> SceneHandles:
     """Create the world's bodies in client ``cid``; ``marker_bias[item] = (lateral, up)``
     [m] prints that item's marker shifted on its face (fault injection).
 
     Creation order is drawing order for TinyRenderer, which shades a pixel only when it
     passes the depth test: items first, then furniture, walls and the floor last, so the
     large background surfaces are mostly rejected behind what stands in front of them
-    (about a third less fragment work per frame in ``lab``)."""
+    (about a third less fragment work per frame in ``lab``). ``robot_basket``: the basket
+    on the robot (:mod:`mmexec.sim.plant`), placed at the world's start pose."""
     items: dict[str, int] = {}
     bias = marker_bias or {}
     for it in world.spec.items:
@@ -138,7 +142,12 @@ def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float
         panels = SimPanels.spawn(world.spec.panels, world.panel_poses, cid,
                                  texture_path=lambda mid: marker_texture_path(mid, texture_dir),
                                  group=GROUP_STATIC, mask=GROUP_QUERY | GROUP_ITEM | GROUP_ARM)
-    cylinders = {o.name for o in world.obstacles if o.shape == "cylinder"} | {r.name for r in world.spec.reflectors}
+    plants = spawn_plants(cid, world.plants, world.spec.depots, robot_basket, world.start.matrix(),
+                          (GROUP_ITEM, GROUP_QUERY | GROUP_STATIC | GROUP_ITEM | GROUP_BODY | GROUP_ARM),
+                          (GROUP_STATIC, GROUP_QUERY | GROUP_ITEM | GROUP_ARM), texture_dir)
+    if plants is not None:
+        items.update(plants.bodies)  # the gripper holds a fruit as it holds an item
+    cylinders = world.cylinder_names()
     names, cols, viss, poss, orns = [], [], [], [], []
     # walls after the furniture in front of them (drawing order, see above)
     for name, T, size, kind in sorted(world.static_boxes(), key=lambda b: b[3] == "wall"):
@@ -173,4 +182,4 @@ def spawn_world(world: World, cid: int, *, marker_bias: Mapping[str, tuple[float
     floor = p.createMultiBody(0, floor_col, _floor_visual(cid, sx, sy), [0, 0, 0], physicsClientId=cid)
     p.changeDynamics(floor, -1, lateralFriction=0.8, physicsClientId=cid)
     p.setCollisionFilterGroupMask(floor, -1, GROUP_STATIC, GROUP_QUERY | GROUP_ITEM | GROUP_ARM, physicsClientId=cid)
-    return SceneHandles(static=static, static_names=tuple(names), floor=floor, items=items, panels=panels)
+    return SceneHandles(static=static, static_names=tuple(names), floor=floor, items=items, panels=panels, plants=plants)

@@ -150,6 +150,10 @@ class TruthLog:
     def _write(self, event: str, **fields: Any) -> None:
         self._out.write(json.dumps({"event": event, **fields}, separators=(",", ":")) + "\n")
 
+    def record(self, event: str, **fields: Any) -> None:
+        """Write one more record (another part of the sim's truth, e.g. the fruit's)."""
+        self._write(event, **fields)
+
     def _contact(self, c: Contact) -> None:
         self.contacts += 1
         self.contact_bodies[c.body] = self.contact_bodies.get(c.body, 0) + 1

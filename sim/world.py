@@ -33,6 +33,7 @@ from mmexec.drivers.geometry import planar_transform, wrap_angle
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, SceneBox
 from mmexec.sim.objects import SimObject, check_placement, place_object
 from mmexec.sim.panel import Panel, panel_boxes, panel_transform
+from mmexec.sim.plant import PlacedPlant, Plant, place_plants
 
 __all__ = [
     "WORLDS_DIR",
@@ -40,6 +41,7 @@ __all__ = [
     "Item",
     "Obstacle",
     "Person",
+    "Plant",
     "Randomize",
     "Reflector",
     "Room",
@@ -167,15 +169,45 @@ class Item:
 
 @dataclass(frozen=True)
 class Depot:
-    """An open basket: ``pose`` [x, y, yaw], ``size`` [x, y, rim height], wall ``thickness`` [m]."""
+    """An open basket: ``pose`` [x, y, yaw], ``size`` [x, y, rim height], wall ``thickness`` [m].
+    ``marker``: an ArUco DICT_4X4_50 id printed (``marker_size`` [m] black square, with its
+    white border) on the outside of the wall on the basket's local ``marker_side``
+    (``-y``: the wall facing local -y), centred on the wall, facing out; None: no marker."""
 
     name: str
     pose: tuple[float, float, float]
     size: tuple[float, float, float] = (0.4, 0.3, 0.15)
     thickness: float = 0.01
+    marker: int | None = None
+    marker_size: float = 0.06
+    marker_side: Literal["+x", "-x", "+y", "-y"] = "-y"
 
     def validate(self) -> list[str]:
-        return _positive(f"depot {self.name!r}: size and thickness", *self.size, self.thickness)
+        out = _positive(f"depot {self.name!r}: size and thickness", *self.size, self.thickness)
+        if self.marker is not None:
+            if not 0 <= self.marker < 50:
+                out.append(f"depot {self.name!r}: marker {self.marker} outside DICT_4X4_50 ids 0..49")
+            if self.marker_size <= 0 or self.marker_size * 8 / 6 > self.size[2] + 1e-9:
+                out.append(f"depot {self.name!r}: marker_size {self.marker_size} with its white border does not fit "
+                           f"the {self.size[2]} m high wall")
+        return out
+
+    def marker_pose(self) -> np.ndarray | None:
+        """``T_map_marker`` of the printed marker (None without one): origin at the
+        marker's centre on the wall's outer face, z out of the face, y up, x = y x z (the
+        camera convention of :mod:`mmexec.skills.perception.markers`)."""
+        if self.marker is None:
+            return None
+        lx, ly, h = self.size
+        normal = {"+x": (1.0, 0.0), "-x": (-1.0, 0.0), "+y": (0.0, 1.0), "-y": (0.0, -1.0)}[self.marker_side]
+        half = lx / 2 if normal[0] else ly / 2
+        c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
+        n = np.array([c * normal[0] - s * normal[1], s * normal[0] + c * normal[1], 0.0])
+        T = np.eye(4)
+        y = np.array([0.0, 0.0, 1.0])
+        T[:3, 0], T[:3, 1], T[:3, 2] = np.cross(y, n), y, n
+        T[:3, 3] = (self.pose[0] + n[0] * (half + 0.0005), self.pose[1] + n[1] * (half + 0.0005), h / 2)
+        return T
 
 
 @dataclass(frozen=True)
@@ -297,6 +329,7 @@ class WorldSpec:
     obstacles: tuple[Obstacle, ...] = ()
     reflectors: tuple[Reflector, ...] = ()
     people: tuple[Person, ...] = ()
+    plants: tuple[Plant, ...] = ()
     randomize: Randomize = field(default_factory=Randomize)
     description: str = ""
     objects: tuple[SimObject, ...] = ()
@@ -315,7 +348,8 @@ class World:
 
     ``item_poses[name]`` is ``T_map_item`` (box centre, marker on the local +x face);
     ``start`` is the robot's true start pose in ``map``; ``people`` walk as given here
-    (waypoints, speeds, pauses drawn).
+    (waypoints, speeds, pauses drawn); ``plants`` carry their drawn fruit and leaves
+    (:mod:`mmexec.sim.plant`).
     """
 
     spec: WorldSpec
@@ -324,6 +358,7 @@ class World:
     obstacles: tuple[Obstacle, ...]
     start: Pose2D
     people: tuple[Person, ...] = ()
+    plants: tuple[PlacedPlant, ...] = ()
     panel_poses: Mapping[str, np.ndarray] = field(default_factory=dict)  #: ``T_map_panel`` (sim/panel.py)
     object_poses: Mapping[str, np.ndarray] = field(default_factory=dict)  #: ``T_map_object`` (sim/objects.py)
 
@@ -355,8 +390,8 @@ class World:
 
     def static_boxes(self) -> list[tuple[str, np.ndarray, tuple[float, float, float], str]]:
         """Every static box as ``(name, T_map_box centre, full size, kind)``; kind is
-        ``wall``, ``shelf``, ``table``, ``depot``, ``obstacle`` or ``reflector``
-        (cylinders appear as their bounding box). This is the physical world, unmapped
+        ``wall``, ``shelf``, ``table``, ``depot``, ``obstacle``, ``reflector`` or ``plant``
+        (a plant's pot and trunk; cylinders appear as their bounding box). This is the physical world, unmapped
         obstacles included (:meth:`unmapped_names`); people are not static."""
         out: list[tuple[str, np.ndarray, tuple[float, float, float], str]] = []
         r = self.spec.room
@@ -405,7 +440,17 @@ class World:
         for rf in self.spec.reflectors:
             out.append((rf.name, _T(rf.position[0], rf.position[1], rf.height / 2, 0.0),
                         (2 * rf.radius, 2 * rf.radius, rf.height), "reflector"))
+        for pl in self.spec.plants:
+            out += [(name, _T(x, y, z, 0.0), size, "plant") for name, (x, y, z), size in pl.solid_parts()]
         return out
+
+    def cylinder_names(self) -> frozenset[str]:
+        """Names of the static parts that are upright cylinders (:meth:`static_boxes`
+        gives their bounding boxes): cylindrical obstacles, reflector posts, plant pots
+        and trunks."""
+        return (frozenset(o.name for o in self.obstacles if o.shape == "cylinder")
+                | frozenset(r.name for r in self.spec.reflectors)
+                | frozenset(name for pl in self.spec.plants for name, _, _ in pl.solid_parts()))
 
     def scene_boxes(self) -> tuple[SceneBox, ...]:
         """Static boxes for arm planning (walls, shelf boards and panels, tables, depot
@@ -522,9 +567,11 @@ def load_world(
     # untagged objects draw from their own stream: a world without them draws what it always drew
     orng = np.random.default_rng(None if seed is None else [seed, 15])
     object_poses = {o.name: place_object(spec, o, orng, rz.item_xy, rz.item_yaw) for o in spec.objects}
+    # plants draw from their own generator: a world without them draws what it always drew
+    plants = place_plants(spec.plants, seed if randomize else None)
     return World(spec=spec, source=str(path), item_poses=item_poses, obstacles=obstacles, start=start, people=people,
                  object_poses=object_poses,
-                 panel_poses=panel_poses)
+                 panel_poses=panel_poses, plants=plants)
 
 
 #: generator stream of the run seed (``default_rng([seed, stream])``) for the panels' poses
@@ -557,7 +604,7 @@ def _cross_check(spec: WorldSpec, raw: YDict, problems: Problems) -> None:
     """Names unique, references resolve, items fit their shelves, everything in the room."""
     seen: dict[str, str] = {}
     sx, sy = spec.room.size
-    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors", "people", "objects", "panels"):
+    for key in ("shelves", "tables", "items", "depots", "obstacles", "reflectors", "people", "objects", "panels", "plants"):
         marks = _list_marks(raw, key)
         for i, obj in enumerate(getattr(spec, key)):
             m = marks[i] if i < len(marks) else raw.mark
