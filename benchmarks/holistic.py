@@ -135,13 +135,48 @@ def _targets(world: World, top: bool, rng: np.random.Generator) -> tuple[str, np
     return "table", _frame(centre, up, np.cross(up, x)), face
 
 
-def make_query(robot: Robot, radius: float, rng: np.random.Generator) -> Query:
-    """One blocked-front query for ``robot`` (see the module doc): the blocker's far side
-    lies where the farthest stand-off's footprint circle would reach, give or take."""
+def _picked_from_front(model: HolisticModel, robot: Robot, T_face: np.ndarray, pre: np.ndarray, grasp: np.ndarray,
+                       world: World, cm: CostMap) -> bool:
+    """Whether ``robot`` picks the target from its front stand-off while nothing blocks
+    it, as the fetch mission's approach and pick would: a stand-off of its profile (on
+    the face normal) is free in ``cm``, and from there the arm has a collision-free IK
+    for the pre-grasp ``pre`` and, near it, for the ``grasp`` (both 4x4 in map)."""
+    model.use_map(cm)
+    model.prepare(world.scene_boxes())
+    try:
+        for d in robot.distances:
+            found = find_standoff(cm, T_face, [d], angle_offsets=(0.0,))
+            if found.pose is None:
+                continue
+            b = found.pose
+            T_am = np.linalg.inv(model.T_map_armbase(b.x, b.y, b.theta))
+            model.scene.place_root(b.x, b.y, b.theta)
+            for seed in robot.seeds:
+                q = model.kin.ik(T_am @ pre, seed, attempts=5, is_valid=model.scene.is_valid)
+                if q is not None and model.kin.ik(T_am @ grasp, q, attempts=1, is_valid=model.scene.is_valid) is not None:
+                    return True
+        return False
+    finally:
+        model.release()
+
+
+def make_query(robot: Robot, model: HolisticModel, rng: np.random.Generator) -> Query:
+    """One blocked-front query for ``robot`` (see the module doc): a target it picks from
+    its front stand-off in the lab as it is, and a blocker whose far side lies where the
+    farthest stand-off's footprint circle would reach, give or take."""
     base = load_world("lab")
+    radius = model.description.info.footprint_radius
+    cm0 = inflate(base.occupancy(0.05), radius, MARGIN)
     reach = max(robot.distances) - radius - MARGIN  # a far side beyond this blocks every stand-off
     for _ in range(200):
         kind, T_grasp, T_face = _targets(base, robot.top_grasp, rng)
+        if kind == "table" and robot.top_grasp:
+            poses = grasp_poses(T_grasp, _axis(robot), pre_grasp=(0.0, 0.0, 0.10))
+        else:
+            poses = grasp_poses(T_grasp, _axis(robot), pre_grasp=(0.0, 0.0, 0.10), grasp_depth=0.03,
+                                grasp_height=robot.grasp_height)
+        if not _picked_from_front(model, robot, T_face, poses.pre_grasp, poses.grasp, base, cm0):
+            continue  # not a target the robot picks from the front anyway
         n = T_face[:3, 2]
         depth, width, height = rng.uniform(0.2, 0.3), rng.uniform(0.3, 0.5), rng.uniform(0.15, 0.24)
         far = max(reach + rng.uniform(0.03, 0.15), depth + 0.05)  # its near side at least 5 cm from the face
@@ -158,11 +193,6 @@ def make_query(robot: Robot, radius: float, rng: np.random.Generator) -> Query:
         start = _start(cm, T_grasp[:3, 3], rng)
         if start is None:
             continue
-        if kind == "table" and robot.top_grasp:
-            poses = grasp_poses(T_grasp, _axis(robot), pre_grasp=(0.0, 0.0, 0.10))
-        else:
-            poses = grasp_poses(T_grasp, _axis(robot), pre_grasp=(0.0, 0.0, 0.10), grasp_depth=0.03,
-                                grasp_height=robot.grasp_height)
         return Query(kind, world, cm, start, poses.pre_grasp, poses.grasp)
     raise RuntimeError("could not build a blocked-front query")
 
@@ -194,14 +224,20 @@ class Outcome:
     arm_ok: bool = False
     arm_ms: float = 0.0
     drive: float = 0.0
+    dense: bool | None = None  # a failure re-run with the dense search: solved?
+
+
+#: The dense search a failure is re-run with: 10 x the goal candidates, no navigation
+#: tolerance, 3 attempts (does the query have a solution at all?)
+DENSE = HolisticConfig(goal_candidates=3000, goal_count=6, attempts=3, tolerance=(0.0, 0.0), time_limit=2.0)
 
 
 def run_robot(robot: Robot, queries: int, seed: int, algorithm: str, time_limit: float, attempts: int,
-              count: int | None, verbose: bool) -> list[Outcome]:
+              count: int | None, verbose: bool, recheck: bool = True) -> list[Outcome]:
     desc = get(robot.name)
     rng = np.random.default_rng(seed)
-    qs = [make_query(robot, desc.info.footprint_radius, rng) for _ in range(queries)][:count]
-    model = HolisticModel.build(desc, qs[0].costmap)
+    model = HolisticModel.build(desc, inflate(load_world("lab").occupancy(0.05), desc.info.footprint_radius, MARGIN))
+    qs = [make_query(robot, model, rng) for _ in range(queries)][:count]
     planner = HolisticPlanner(model, HolisticConfig(algorithm=algorithm, time_limit=time_limit, attempts=attempts,
                                                     seed=seed))
     arm = ArmPlanner(model.scene, model.kin, PlannerConfig(time_limit=1.0, attempts=5, seed=seed))
@@ -233,10 +269,18 @@ def run_robot(robot: Robot, queries: int, seed: int, algorithm: str, time_limit:
                     if not a.success:
                         o.reason = f"arm re-plan: {a.reason}"
             model.release()
+            if not o.ok and not o.reason.startswith("bad solution") and "arm re-plan" not in o.reason and recheck:
+                # is there a solution at all? a 10x denser goal search without the navigation tolerance
+                model.prepare(q.world.scene_boxes())
+                dense = planner.plan(q.start, robot.stow, q.pre_grasp, T_map_grasp=q.grasp, seeds=robot.seeds,
+                                     config=DENSE)
+                model.release()
+                o.dense = dense.success
             out.append(o)
             if verbose:
+                dense = "" if o.dense is None else f" [dense search: {'solved' if o.dense else 'none'}]"
                 print(f"{robot.name} {algorithm} query {i:2d} {q.kind:5s}: {'ok ' if o.ok else 'FAIL'} {o.ms:7.1f} ms "
-                      f"drive {o.drive:4.2f} m; arm {'ok ' if o.arm_ok else '-- '} {o.arm_ms:6.1f} ms {o.reason}")
+                      f"drive {o.drive:4.2f} m; arm {'ok ' if o.arm_ok else '-- '} {o.arm_ms:6.1f} ms {o.reason}{dense}")
     finally:
         model.close()
     return out
@@ -253,6 +297,11 @@ def _summary(name: str, res: list[Outcome]) -> str:
     if arm:
         line += (f"; arm re-plan (RRT-Connect) {len(arm)}/{len(ok)}, median {statistics.median(arm):.0f} ms, "
                  f"max {max(arm):.0f} ms")
+    checked = [o for o in res if o.dense is not None]
+    if checked:
+        found = sum(bool(o.dense) for o in checked)
+        line += (f"; of {len(checked)} failures re-run with the dense search, {found} solved there "
+                 f"(so {len(ok)}/{len(res) - len(checked) + found} of the queries with a known solution)")
     return line
 
 
@@ -278,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  failed {fails.count(reason)}x: {reason}")
         if args.rrtstar:
             star = run_robot(robot, args.queries, args.seed, "rrtstar", args.time_limit, args.attempts, args.rrtstar,
-                             args.verbose)
+                             args.verbose, recheck=False)
             print(_summary(f"{name} holistic RRT* (first solution) {args.time_limit:g} s x {args.attempts}", star))
     print(f"holistic_plan_median_ms: {statistics.median(all_ms):.1f}")
     return 0

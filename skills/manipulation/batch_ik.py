@@ -26,9 +26,20 @@ W_ROT = 0.25
 
 def _skew_rows(w: np.ndarray) -> np.ndarray:
     """(B, 3, 3) skew matrices of (B, 3) vectors."""
-    z = np.zeros(w.shape[0])
-    return np.stack([np.stack([z, -w[:, 2], w[:, 1]], 1), np.stack([w[:, 2], z, -w[:, 0]], 1),
-                     np.stack([-w[:, 1], w[:, 0], z], 1)], 1)
+    S = np.zeros((w.shape[0], 3, 3))
+    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
+    return S
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross products of (B, 3) arrays (np.cross's axis handling costs more
+    than the products at these sizes)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def batch_fk(kin: ArmKinematics, Q: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -46,7 +57,7 @@ def batch_fk(kin: ArmKinematics, Q: np.ndarray, jacobian: bool = True) -> tuple[
         if J is not None:
             wi = R @ w
             J[:, :3, i] = wi
-            J[:, 3:, i] = np.cross(p, wi) + R @ v
+            J[:, 3:, i] = _cross(p, wi) + R @ v
         s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
         Ri = np.eye(3) + s * W + (1.0 - c) * W2
         pi = th[:, None] * v + (1.0 - c[:, :, 0]) * (W @ v) + (th[:, None] - s[:, :, 0]) * (W2 @ v)
@@ -104,17 +115,17 @@ def batch_ik(kin: ArmKinematics, T_targets: np.ndarray, Q0: np.ndarray, *, free_
         assert J is not None
         e_p = p_t[idx] - p
         Jw, Jv = J[:, :3], J[:, 3:]
-        Jp = Jv - np.cross(p[:, :, None], Jw, axisa=1, axisb=1, axisc=1)
+        Jp = Jv - _skew_rows(p) @ Jw
         if free_approach_rotation:
             a = R[:, :, axis]
-            cr = np.cross(a, a_t[idx])
+            cr = _cross(a, a_t[idx])
             sn = np.linalg.norm(cr, axis=1)
             ang = np.arctan2(sn, np.einsum("bi,bi->b", a, a_t[idx]))
             e_r = np.where((sn > 1e-12)[:, None], cr / np.where(sn > 1e-12, sn, 1.0)[:, None] * ang[:, None], 0.0)
             flip = (sn <= 1e-12) & (ang > 1.0)  # anti-parallel: any perpendicular axis
             if flip.any():
                 ref = np.where((np.abs(a[flip, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-                perp = np.cross(a[flip], ref)
+                perp = _cross(a[flip], ref)
                 e_r[flip] = perp / np.linalg.norm(perp, axis=1)[:, None] * ang[flip][:, None]
             P = np.eye(3) - a[:, :, None] * a[:, None, :]
             Jr = P @ Jw

@@ -56,7 +56,7 @@ import math
 import threading
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -150,7 +150,9 @@ class HolisticResult:
     ``map`` (the navigation goal); ``arm`` the arm configuration there [rad]; ``path`` the
     9-D states from the start; ``attempts`` used; ``goals`` goal states of the last
     attempt; ``checks`` validity checks; ``start_adjusted`` when the arm's start posture
-    touched the robot itself and the search started just off it."""
+    touched the robot itself and the search started just off it; ``tolerant`` False when
+    the goal was found only without the navigation tolerance (the last attempt waives
+    it when no earlier one found a goal)."""
 
     success: bool
     reason: str = ""
@@ -162,6 +164,7 @@ class HolisticResult:
     goals: int = 0
     checks: int = 0
     start_adjusted: bool = False
+    tolerant: bool = True
 
 
 def armbase_in_map(base: Pose2D, mount: Sequence[float]) -> np.ndarray:
@@ -509,14 +512,23 @@ class HolisticPlanner:
             return fail(f"start ({start.x:.2f}, {start.y:.2f}) is blocked in the inflated map")
         seeds = list(seeds) + [q0]
         used, goals = 0, []
-        adjusted = False
+        adjusted = tolerant = False
+        found_goals = False
         for attempt in range(cfg.attempts):
             if self.stop.is_set():
                 return fail(CANCELLED, used, len(goals))
             used = attempt + 1
-            poses, counts = self._candidates(start, target, lo, hi, rng, cfg)
+            # attempts that found no goal draw twice the candidates (up to 8 x), and the
+            # last of several goal-less attempts waives the navigation tolerance
+            acfg = cfg if found_goals else replace(cfg, goal_candidates=cfg.goal_candidates * min(8, 2 ** attempt))
+            last_chance = not found_goals and attempt == cfg.attempts - 1 and attempt > 0
+            if last_chance:
+                acfg = replace(acfg, tolerance=(0.0, 0.0))
+            tolerant = acfg.tolerance != (0.0, 0.0)
+            poses, counts = self._candidates(start, target, lo, hi, rng, acfg)
             goals, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, drive, free_approach_rotation,
-                                               cfg, rng)
+                                               acfg, rng)
+            found_goals = found_goals or bool(goals)
             if self.stop.is_set():
                 return fail(CANCELLED, used, len(goals))
             if not goals:
@@ -524,7 +536,7 @@ class HolisticPlanner:
                     continue
                 chain = ", ".join(f"{v} {k}" for k, v in counts.items())
                 what = ("a collision-free IK" + (", the grasp near it" if T_map_grasp is not None else "")
-                        + ", room for the stowed arm and the navigation tolerance")
+                        + ", room for the stowed arm" + (" and the navigation tolerance" if tolerant else ""))
                 return fail(f"no base pose within reach of the pre-grasp at ({target[0]:.2f}, {target[1]:.2f}, "
                             f"{target[2]:.2f}): of {chain}, {with_ik} had an IK and none {what}", used)
             start_state = state0
@@ -539,7 +551,8 @@ class HolisticPlanner:
                     path.insert(0, tuple(float(v) for v in state0))
                 end = path[-1]
                 return HolisticResult(True, "", time.perf_counter() - t0, Pose2D(end[0], end[1], wrap_angle(end[2])),
-                                      tuple(end[3:]), path, used, len(goals), m.scene.checks - checks0, adjusted)
+                                      tuple(end[3:]), path, used, len(goals), m.scene.checks - checks0, adjusted,
+                                      tolerant)
         if self.stop.is_set():
             return fail(CANCELLED, used, len(goals))
         return fail(f"no plan within {cfg.time_limit:g} s x {cfg.attempts} attempts "

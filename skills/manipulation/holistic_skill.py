@@ -176,7 +176,7 @@ def _arm_job(ws: ArmWorkspace, reached: Pose2D, mount: Sequence[float], q: list[
 def _emit_plan(ctx: SkillContext, res: HolisticResult, round_: int) -> None:
     pose = res.base_pose
     ctx.emit("holistic_plan", success=res.success, reason=res.reason, planning_ms=round(res.planning_time * 1e3, 1),
-             attempts=res.attempts, goals=res.goals, checks=res.checks, round=round_,
+             attempts=res.attempts, goals=res.goals, checks=res.checks, round=round_, tolerant=res.tolerant,
              pose=[round(pose.x, 3), round(pose.y, 3), round(pose.theta, 3)] if pose is not None else None,
              arm=[round(v, 4) for v in res.arm] if res.arm is not None else None, node=ctx.node_path)
 
