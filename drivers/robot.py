@@ -548,7 +548,10 @@ def _head_motion(robot: RealRobot, model: Any) -> np.ndarray:
     head = robot.head
     if head is None:
         raise CapabilityError("the head carrying the camera is not connected")
-    st = head.state()
+    try:
+        st = head.state()
+    except Exception as e:  # no reading yet (the driver's NotConnected): the frame's pose is unknown
+        raise CapabilityError(f"the head's joints are not known: {e}") from e
     return model.motion(st.pan, st.tilt)  # type: ignore[no-any-return]
 
 

@@ -239,3 +239,15 @@ def test_head_config_problems_are_located(tmp_path: Path, video: Path) -> None:
     with pytest.raises(InputError) as e:
         rb.check(load_config(no_head).section())
     assert "robot.camera.mount_link: 'head' needs 'head: {kind: wx250s_head}'" in str(e.value)
+
+
+def test_a_camera_pose_without_head_joints_is_a_capability_error(no_leaks: None) -> None:
+    from mmexec.drivers.interfaces import CapabilityError
+
+    model = HeadModel.of(locobot_wx250s.DESCRIPTION)
+    robot = rb.RealRobot("r", {})
+    with pytest.raises(CapabilityError, match="the head carrying the camera is not connected"):
+        rb._head_motion(robot, model)
+    robot.head = WX250s(cfg("/dev/nope")).head  # never connected: no reading
+    with pytest.raises(CapabilityError, match="the head's joints are not known: /dev/nope: no head state yet"):
+        rb._head_motion(robot, model)
