@@ -3,7 +3,8 @@
 Section schema (every key optional)::
 
     mock:
-      capabilities: [base, arm, gripper, camera, lidar]   # leave some out to test needs
+      capabilities: [base, arm, gripper, camera, lidar]   # leave some out to test needs; add
+                                                           # head for a pan/tilt head carrying the camera
       base:    {start: [x, y, theta], blocked: false}      # map frame, m / rad
       arm:     {start: [q1..q6], fail_moves: [1, 2], fail_reason: "...", fail_at: 0.5,
                 stop_time: 0.2}                            # rad, fraction, s
@@ -41,7 +42,7 @@ from mmexec.drivers.mock.robot import (
 
 __all__ = ["BACKEND", "FAULTS_OFF", "FAULT_PATCHES", "MockConfig", "build", "parse_section", "robot_from_config"]
 
-Capability = Literal["base", "arm", "gripper", "camera", "lidar"]
+Capability = Literal["base", "arm", "gripper", "camera", "lidar", "head"]
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,7 @@ def robot_from_config(cfg: MockConfig, *, profile: Mapping[str, Any] | None = No
     if robot.camera is not None:
         c = cfg.camera
         robot.camera = MockCamera(clock, robot.base, width=c.width, height=c.height, hfov=c.hfov,
-                                  depth=c.depth, dropouts=c.dropouts)
+                                  depth=c.depth, dropouts=c.dropouts, head=robot.head)
     if robot.lidar is not None:
         robot.lidar = MockLidar(clock, rays=cfg.lidar.rays, range=cfg.lidar.range)
     return robot

@@ -217,3 +217,14 @@ def test_point_head_moves_and_refuses(robot: MockRobot, ctx: SkillContext) -> No
     headless = SkillContext.for_robot(MockRobot(capabilities={"camera"}))
     run = run_skill(point_head.spec, headless, {}, step=lambda: None)
     assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.PRECONDITION
+
+
+def test_a_mock_config_can_give_the_robot_a_head(tmp_path) -> None:
+    from mmexec.executive.config import build_robot, load_config
+
+    cfg = tmp_path / "mock.yaml"
+    cfg.write_text("backend: mock\nmock:\n  capabilities: [base, camera, head]\n")
+    loaded = load_config(cfg)
+    assert loaded.capabilities() == {"base", "camera", "head"}
+    robot = build_robot(loaded)
+    assert robot.head is not None and robot.camera.head is robot.head
