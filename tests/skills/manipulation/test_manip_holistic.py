@@ -220,3 +220,62 @@ def test_holistic_standoff_skill_on_the_mock(mock_robot, run_mock_skill, skill_c
         assert "holistic_plan" in events and "base_status" in events
     finally:
         close_workspace(skill_ctx.world)
+
+
+@pytest.mark.slow
+def test_holistic_standoff_in_the_sim(tmp_path):
+    """The skill on the simulated LoCoBot in the lab with a 0.45 m deep box on the floor in
+    front of box_1 (no stand-off of the profile is free): the base stops where the plan
+    said, away from the blocker, and the true arm holds the tool at the pre-grasp."""
+    import io
+    from pathlib import Path
+
+    from mmexec.executive.config import LoadedConfig, build_robot
+    from mmexec.executive.eventlog import read_log
+    from mmexec.executive.runner import Progress, Runner, RunOptions
+    from mmexec.skills.manipulation.holistic_skill import grasp_frame
+
+    repo = Path(__file__).resolve().parents[3]
+    world = (repo / "sim" / "worlds" / "lab.yaml").read_text()
+    bin_line = "  - {name: bin, pose: [2.7, 1.3, 0.0], size: [0.3, 0.3, 0.6], shape: cylinder}\n"
+    assert bin_line in world
+    world = world.replace(bin_line, bin_line + "  - {name: blocker, pose: [4.33, 2.3, 0.0], size: [0.45, 0.4, 0.2], "
+                                               "shape: box}\n")
+    (tmp_path / "lab_blocked.yaml").write_text(world)
+    config = (repo / "config" / "locobot_sim.yaml").read_text().replace("  world: lab\n", f"  world: {tmp_path / 'lab_blocked.yaml'}\n")
+    (tmp_path / "sim.yaml").write_text(config)
+    point, yaw = [4.575, 2.3, 0.28], math.pi  # box_1's centre; the gripper comes from the room (-x)
+    (tmp_path / "mission.yaml").write_text(
+        "mission: holistic_demo\ntree:\n  skill: holistic_standoff\n"
+        f"  params: {{point: {point}, grasp: front, yaw: {yaw}, size: [0.06, 0.06, 0.06]}}\n")
+    holder: dict = {}
+
+    def factory(loaded: LoadedConfig):
+        holder["robot"] = build_robot(loaded, seed=0)
+        return holder["robot"]
+
+    seen: dict = {}
+
+    def on_record(record: dict) -> None:
+        if record.get("event") == "request_end":  # SIM-ONLY ground truth, before the robot closes
+            robot = holder["robot"]
+            seen["base"] = robot.truth.base_pose()
+            seen["q"] = list(robot.arm.state().positions)
+            seen["mount"] = np.asarray(robot.arm.mount)
+
+    opts = RunOptions(mission=tmp_path / "mission.yaml", config=tmp_path / "sim.yaml", requests=[], seed=0,
+                      log_path=tmp_path / "events.jsonl")
+    out = io.StringIO()
+    runner = Runner(opts, out=out, err=out, progress=Progress(io.StringIO(), enabled=False), robot_factory=factory)
+    runner.add_log_listener(on_record)
+    runner.prepare()
+    assert runner.run() == 0, out.getvalue()
+    records = read_log(tmp_path / "events.jsonl")
+    plan = next(r for r in records if r.get("event") == "holistic_plan")
+    assert plan["success"] and plan["round"] == 0
+    base = seen["base"]
+    assert math.dist((base.x, base.y), plan["pose"][:2]) < 0.08  # navigation stopped near the planned pose
+    assert base.x < 4.33 - 0.225 - 0.17  # not on the blocker: behind or beside it, footprint clear
+    T_pre = grasp_poses(grasp_frame(point, "front", yaw), 0, pre_grasp=(0.0, 0.0, 0.10)).pre_grasp
+    T = base.matrix() @ seen["mount"] @ wx250s().fk(seen["q"])
+    assert np.linalg.norm(T[:3, 3] - T_pre[:3, 3]) < 0.02  # the true tool at the pre-grasp
