@@ -42,6 +42,22 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+_EYE3 = np.eye(3)
+
+
+def _screw_terms(kin: ArmKinematics) -> list[tuple[np.ndarray, ...]]:
+    """Per joint: omega, v, [omega], [omega]^2, [omega] v, [omega]^2 v (cached on ``kin``)."""
+    cache = kin.__dict__.get("_batch_terms")
+    if cache is None:
+        cache = []
+        for i in range(kin.dof):
+            w, v = kin.screws[:3, i].copy(), kin.screws[3:, i].copy()
+            W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+            cache.append((w, v, W, W @ W, W @ v, W @ W @ v))
+        object.__setattr__(kin, "_batch_terms", cache)
+    return cache
+
+
 def batch_fk(kin: ArmKinematics, Q: np.ndarray, jacobian: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Tool rotations (B, 3, 3), positions (B, 3) and space Jacobians (B, 6, n) (rows
     omega then v; None without ``jacobian``) at joint rows ``Q`` (B, n)."""
@@ -49,19 +65,16 @@ def batch_fk(kin: ArmKinematics, Q: np.ndarray, jacobian: bool = True) -> tuple[
     R = np.broadcast_to(np.eye(3), (B, 3, 3)).copy()
     p = np.zeros((B, 3))
     J = np.zeros((B, 6, n)) if jacobian else None
-    for i in range(n):
-        w, v = kin.screws[:3, i], kin.screws[3:, i]
-        W = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-        W2 = W @ W
+    for i, (w, v, W, W2, Wv, W2v) in enumerate(_screw_terms(kin)):
         th = Q[:, i]
         if J is not None:
             wi = R @ w
             J[:, :3, i] = wi
             J[:, 3:, i] = _cross(p, wi) + R @ v
-        s, c = np.sin(th)[:, None, None], np.cos(th)[:, None, None]
-        Ri = np.eye(3) + s * W + (1.0 - c) * W2
-        pi = th[:, None] * v + (1.0 - c[:, :, 0]) * (W @ v) + (th[:, None] - s[:, :, 0]) * (W2 @ v)
-        p = np.einsum("bij,bj->bi", R, pi) + p
+        s, c = np.sin(th), np.cos(th)
+        Ri = _EYE3 + s[:, None, None] * W + (1.0 - c)[:, None, None] * W2
+        pi = th[:, None] * v + (1.0 - c)[:, None] * Wv + (th - s)[:, None] * W2v
+        p = (R @ pi[:, :, None])[:, :, 0] + p
         R = R @ Ri
     M = kin.M
     return R @ M[:3, :3], np.einsum("bij,j->bi", R, M[:3, 3]) + p, J

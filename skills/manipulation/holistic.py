@@ -93,6 +93,10 @@ log = logging.getLogger(__name__)
 #: Names of the three virtual joints (the paper's prismatic x, prismatic y, revolute z).
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
 
+#: Candidate base poses solved per IK batch (nearest first); goal sampling stops at the
+#: first chunk after which ``goal_count`` goals are found.
+GOAL_CHUNK = 64
+
 
 @dataclass(frozen=True)
 class HolisticConfig:
@@ -377,10 +381,11 @@ class HolisticPlanner:
                      seeds: Sequence[Sequence[float]], stow: np.ndarray, free_rotation: bool, cfg: HolisticConfig,
                      rng: np.random.Generator) -> tuple[list[tuple[float, ...]], int]:
         """Up to ``goal_count`` valid 9-D goal states from the base ``poses`` (n x 3) in
-        order, and how many poses had an IK solution at all. The pre-grasp's IK runs for
-        all poses at once (:func:`~mmexec.skills.manipulation.batch_ik.batch_ik`), from
-        each seed posture turned towards the target, then from one random start; the
-        collision checks and the grasp's IK only for solved poses, in order, until enough.
+        order, and how many poses (of those tried) had an IK solution at all. The
+        pre-grasp's IK runs for :data:`GOAL_CHUNK` poses at once
+        (:func:`~mmexec.skills.manipulation.batch_ik.batch_ik`), from each seed posture
+        turned towards the target, then from one random start; the collision checks and the
+        grasp's IK only for solved poses, in order, until enough.
         A goal also needs the arm's ``stow`` posture free at its base pose (the base drives
         there with the arm stowed) and the pre-grasp's IK from the base pose shifted by
         ``tolerance``."""
@@ -413,29 +418,35 @@ class HolisticPlanner:
                                - math.pi, lo[0], hi[0])
             starts.append(Q0)
         starts.append(rng.uniform(np.maximum(lo, -math.pi), np.minimum(hi, math.pi), (k, kin.dof)))
-        for Q0 in starts:
-            todo = np.flatnonzero(~solved)
-            if todo.size == 0 or self.stop.is_set():
-                break
-            qs, ok = batch_ik(kin, T_pre[todo], Q0[todo], free_approach_rotation=free_rotation, max_iterations=80)
-            q[todo[ok]] = qs[ok]
-            solved[todo[ok]] = True
         goals: list[tuple[float, ...]] = []
-        for i in np.flatnonzero(solved):
+        # in chunks, nearest first: an easy query stops after the first chunk or two
+        for c0 in range(0, k, GOAL_CHUNK):
+            chunk = np.arange(c0, min(k, c0 + GOAL_CHUNK))
+            for Q0 in starts:
+                todo = chunk[~solved[chunk]]
+                if todo.size == 0 or self.stop.is_set():
+                    break
+                qs, ok = batch_ik(kin, T_pre[todo], Q0[todo], free_approach_rotation=free_rotation, max_iterations=80)
+                q[todo[ok]] = qs[ok]
+                solved[todo[ok]] = True
+            for i in chunk[solved[chunk]]:
+                if self.stop.is_set() or len(goals) >= cfg.goal_count:
+                    break
+                bx, by, byaw = (float(v) for v in poses[i])
+                if not m.arm_valid(bx, by, byaw, q[i]) or not m.scene.is_valid(stow):
+                    continue
+                if T_map_grasp is not None:
+                    T_am = np.eye(4)
+                    T_am[:3, :3], T_am[:3, 3] = Rt[i], -Rt[i] @ t_ab[i]
+                    qg = kin.ik(T_am @ T_map_grasp, q[i], free_approach_rotation=free_rotation, attempts=1,
+                                max_iterations=80)
+                    if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
+                        continue
+                if not self._tolerant(bx, by, byaw, q[i], T_map_pre, free_rotation, cfg):
+                    continue
+                goals.append((bx, by, byaw, *(float(v) for v in q[i])))
             if self.stop.is_set() or len(goals) >= cfg.goal_count:
                 break
-            bx, by, byaw = (float(v) for v in poses[i])
-            if not m.arm_valid(bx, by, byaw, q[i]) or not m.scene.is_valid(stow):
-                continue
-            if T_map_grasp is not None:
-                T_am = np.eye(4)
-                T_am[:3, :3], T_am[:3, 3] = Rt[i], -Rt[i] @ t_ab[i]
-                qg = kin.ik(T_am @ T_map_grasp, q[i], free_approach_rotation=free_rotation, attempts=1, max_iterations=80)
-                if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
-                    continue
-            if not self._tolerant(bx, by, byaw, q[i], T_map_pre, free_rotation, cfg):
-                continue
-            goals.append((bx, by, byaw, *(float(v) for v in q[i])))
         return goals, int(solved.sum())
 
     def _tolerant(self, x: float, y: float, yaw: float, q: np.ndarray, T_map_pre: np.ndarray, free_rotation: bool,
