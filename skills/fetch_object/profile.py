@@ -81,6 +81,9 @@ class FetchObjectSettings:
                                  doc="base headings (from the place's) looked from at each search stop")
     frames: int = setting(2, ge=1, le=10, doc="frames (predictions) per view, fused")
     settle_time: float = setting(0.3, unit="s", ge=0, doc="wait after a turn before looking")
+    locate_pose: str | None = setting(None, refers_to="named_poses", doc=(
+        "named arm pose taken before looking from the stand-off (a wrist camera pointed down at the object); "
+        "None: the camera stays as it is (a head camera)"))
     operator_timeout: float = setting(60.0, unit="s", gt=0,
                                       doc="a dangerous item's prompt fails the request after this long unanswered")
     back_off: float = setting(0.2, unit="m", ge=0, doc="the base backs away this far after a pick")

@@ -331,11 +331,12 @@ def support_normal(ctx: SkillContext, xy: np.ndarray, toward: np.ndarray, reach:
     d = np.hypot(px, py)
     dirs = np.stack([px, py], axis=1) / np.maximum(d, 1e-9)[:, None]
     k = int(np.argmin(d - 1e-3 * (dirs @ fallback)))  # the nearest free cell (ties: the camera's side)
-    # the free cells along that edge, as near as the nearest plus a cell and within 45
-    # degrees of it: their mean direction is perpendicular to the edge
-    near = (d <= d[k] + 1.5 * res) & (dirs @ dirs[k] > math.cos(math.pi / 4))
+    # the free cells along that edge (as near as the nearest plus a cell and a half, on its
+    # side): their mean direction is perpendicular to the edge (the nearest cell alone is
+    # off by up to half a cell); two edges as near (a corner) give the diagonal
+    near = (d <= d[k] + 1.5 * res) & (dirs @ dirs[k] > 0.0)
     m = dirs[near].sum(axis=0)
-    m /= max(float(np.linalg.norm(m)), 1e-9)
+    m = m / max(float(np.linalg.norm(m)), 1e-9)
     return float(m[0]), float(m[1])
 
 
@@ -397,14 +398,20 @@ def approach_object(ctx: SkillContext, distance_index: int = 0, timeout: float |
     needs=("camera",),
 )
 def locate_object(ctx: SkillContext, frames: int | None = None) -> SkillGen:
-    """Look at the found object again from where the robot stands (the stand-off): the
-    pick plans from this closest view. EXECUTION when it is not in view."""
+    """Look at the found object again from where the robot stands (the stand-off), the arm
+    first in ``fetch_object.locate_pose`` when given (a wrist camera pointed down): the
+    pick plans from this closest view. When the object is not in view from there, the
+    pick uses the estimate it was found with (logged)."""
     t = _target(ctx, "locate_object")
     prof = fetch_object_settings(ctx)
+    if prof.locate_pose is not None and ctx.robot.arm is not None:
+        yield from move_named(ctx, prof.locate_pose)
     yield from _settle(ctx, prof.settle_time)
     near = yield from look_for(ctx, t.item, frames or prof.frames)
     if near is None:
-        raise SkillFailure(FailureKind.EXECUTION, f"{t.item.name} not in view from its stand-off")
+        log.warning("%s not in view from its stand-off; the pick uses the estimate from %.2f m", t.item.name, t.distance)
+        ctx.emit("object_not_relocated", item=t.item.name, distance=round(t.distance, 3), node=ctx.node_path)
+        return {"centre": [float(v) for v in t.centre]}
     _record(ctx, near, "stand-off")
     return {"centre": [float(v) for v in near.centre]}
 

@@ -154,3 +154,14 @@ def test_missing_place_is_a_clear_error() -> None:
     item = CatalogueItem("tape", "tape", ("workbnch",), (0.1, 0.1, 0.05), False)
     with pytest.raises(ValueError, match=r"item 'tape': no place named 'workbnch'; did you mean 'workbench'\?"):
         search_order(item, PLACES, LOCATIONS)
+
+
+def test_grasp_mode_per_item(tmp_path: Path) -> None:
+    text = GOOD.replace("    dangerous: true\n", "    dangerous: true\n    grasp: top\n")
+    cat = load_catalogue(_write(tmp_path, text), places=PLACES, classes=CLASSES)
+    assert cat.item("screwdriver").grasp == "top"
+    assert cat.item("tape").grasp is None  # the robot profile's default
+    bad = GOOD.replace("    dangerous: true\n", "    dangerous: true\n    grasp: sideways\n")
+    with pytest.raises(InputError) as e:
+        load_catalogue(_write(tmp_path, bad), places=PLACES, classes=CLASSES)
+    assert "items.screwdriver.grasp" in str(e.value) and "sideways" in str(e.value)
