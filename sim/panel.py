@@ -380,6 +380,16 @@ class SimPanels:
         self._drained = len(self.presses)
         return out
 
+    def hide_markers(self, panel: str) -> None:
+        """Sim-only fault/test helper: the panel's face markers stop being visible (the
+        locator stays)."""
+        cap = next((c for c in self.caps if c.panel.name == panel), None)
+        if cap is None:
+            raise KeyError(f"no panel {panel!r}")
+        first = 2 * len(cap.panel.buttons)  # links: cap and light per button, then the markers
+        for k in range(len(cap.panel.markers)):
+            p.changeVisualShape(cap.body, first + k, rgbaColor=[0, 0, 0, 0], physicsClientId=self.cid)
+
     def remove_button(self, panel: str, button: str) -> None:
         """Sim-only fault/test helper: take a button's cap off (it can no longer be pressed)."""
         for c in self.caps:

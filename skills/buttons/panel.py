@@ -182,7 +182,8 @@ def _follow(ctx: SkillContext, res: PlanResult, what: str,
     params=[
         Param("marker", int, doc="the locator marker's id (default: profile buttons.locator)"),
         Param("locations", list, doc="places to search from after the current one: [x, y, theta] or named "
-                                     "poses (default, or empty: profile search.locations)"),
+                                     "poses (default, or empty: profile buttons.search_locations, else "
+                                     "search.locations)"),
         Param("timeout", float, unit="s", default=300.0, doc="give up after this much clock time"),
     ],
     outputs=[Output("pose", list, doc="[x, y, z, yaw] of the panel's face centre in map, from the locator"),
@@ -201,7 +202,7 @@ def find_panel(ctx: SkillContext, marker: int | None = None, locations: list[Any
     mid = s.locator if marker is None else marker
     ctx.world.pop(WORLD_PANEL, None)
     ctx.world[WORLD_DONE] = set()
-    raw = locations if locations else [list(p) for p in search_settings(ctx).locations]
+    raw = locations if locations else [list(p) for p in (s.search_locations or search_settings(ctx).locations)]
     stops: list[tuple[Any, str] | None] = [None]
     for i, loc in enumerate(raw):
         stops.append((base_pose(ctx, loc), loc) if isinstance(loc, str)
@@ -212,7 +213,10 @@ def find_panel(ctx: SkillContext, marker: int | None = None, locations: list[Any
     views = places = 0
     base = ctx.robot.base
     assert base is not None
-    sweep = [(name, pan) for name in s.sweep for pan in s.sweep_pan_deg]
+    # a camera not on the arm (no arm.look pose: the LoCoBot's head) is not swept by the arm
+    on_arm = arm_settings(ctx).look is not None
+    sweep: list[tuple[str | None, float]] = ([(name, pan) for name in s.sweep for pan in s.sweep_pan_deg] if on_arm
+                                             else [(None, 0.0)])
     for stop in stops:
         if stop is not None:
             pose, label = stop
@@ -229,9 +233,10 @@ def find_panel(ctx: SkillContext, marker: int | None = None, locations: list[Any
         while True:
             order = sweep if len(sweep) < 2 or views % 2 == 0 else sweep[::-1]  # no needless swing back
             for name, pan in order:
-                q = list(arm_joints(ctx.profile, name))
-                q[0] += math.radians(pan)
-                yield from _move_joints(ctx, ws, q, f"search pose {name} {pan:+.0f} deg")
+                if name is not None:
+                    q = list(arm_joints(ctx.profile, name))
+                    q[0] += math.radians(pan)
+                    yield from _move_joints(ctx, ws, q, f"search pose {name} {pan:+.0f} deg")
                 yield from _settle(ctx, SETTLE)
                 views += 1
                 est = yield from look(ctx, mid, n_frames)
@@ -271,7 +276,7 @@ def find_panel(ctx: SkillContext, marker: int | None = None, locations: list[Any
 def approach_panel(ctx: SkillContext, attempt: int = 0, timeout: float | None = None) -> SkillGen:
     """Park facing the panel at the stand-off distance along its normal (the fitted
     frame when the markers have been fitted, else the locator's), 10 degrees either side
-    when straight in front is blocked. PLANNING when no stand-off is free or reachable."""
+    when straight in front is blocked (then 20). PLANNING when no stand-off is free or reachable."""
     s = buttons_settings(ctx)
     est = panel_estimate(ctx)
     shifts = (0.0, -s.retry_shift, s.retry_shift)
@@ -280,11 +285,12 @@ def approach_panel(ctx: SkillContext, attempt: int = 0, timeout: float | None = 
     assert base is not None
     cm = costmap(ctx)
     here = base.state().pose
-    found = find_standoff(cm, est.T_map_panel, [d], angle_offsets=(0.0, math.radians(10), -math.radians(10)),
+    found = find_standoff(cm, est.T_map_panel, [d], angle_offsets=tuple(math.radians(a) for a in (0, 10, -10, 20, -20)),
                           start=(here.x, here.y))
     if not found.ok or found.pose is None:
-        raise SkillFailure(FailureKind.PLANNING, f"no path to the panel's stand-off {d:.2f} m: "
-                                                 f"{found.reason or 'no free stand-off'}")
+        why = ("no path from here for the footprint" if any(t[2] == "no path from start" for t in found.tried)
+               else "no free stand-off")
+        raise SkillFailure(FailureKind.PLANNING, f"no path to the panel's stand-off {d:.2f} m: {why}")
     ctx.emit("standoff", marker=s.locator, distance=d, pose=[round(found.pose.x, 3), round(found.pose.y, 3),
                                                              round(found.pose.theta, 3)], node=ctx.node_path)
     limit = timeout if timeout is not None else nav_settings(ctx).timeout
@@ -394,18 +400,22 @@ def _locate(ctx: SkillContext, frames: int | None) -> SkillGen:
     n = camera_settings(ctx).detect_frames if frames is None else frames
     lay = layout(s)
     seen: dict[int, list[np.ndarray]] = {}
+    on_arm = arm_settings(ctx).look is not None
     T_tool_cam = _tool_camera(ctx, ws)
     guess = est.T_map_panel
     det = detector(ctx)
     yield from wait_goal(ctx, closing, timeout=GRIPPER_TIMEOUT)
-    for k, view in enumerate(s.views):
-        T_tool = _view_pose(guess, view) @ np.linalg.inv(T_tool_cam)
-        try:
-            res = yield from _plan_pose(ctx, ws, ws.planner, T_tool, f"panel view {k + 1}", (guess, GUESS_MARGIN))
-        except SkillFailure as e:
-            log.info("panel view %d: %s", k + 1, e.reason)
-            continue
-        yield from _follow(ctx, res, f"panel view {k + 1}")
+    # an arm-mounted camera is pointed at the panel from each view in turn; any other
+    # camera (a head) looks from where it is
+    for k, view in enumerate(s.views if on_arm else [None]):
+        if view is not None:
+            T_tool = _view_pose(guess, view) @ np.linalg.inv(T_tool_cam)
+            try:
+                res = yield from _plan_pose(ctx, ws, ws.planner, T_tool, f"panel view {k + 1}", (guess, GUESS_MARGIN))
+            except SkillFailure as e:
+                log.info("panel view %d: %s", k + 1, e.reason)
+                continue
+            yield from _follow(ctx, res, f"panel view {k + 1}")
         yield from _settle(ctx, SETTLE)
         got = 0
         while got < n:
@@ -506,6 +516,7 @@ def _press(ctx: SkillContext, buttons: list[Any] | None) -> SkillGen:
     planner = ArmPlanner(ws.scene, kin, ws.planner.config)
     planner.stop = ws.planner.stop  # off_tick's cancel stops this planner too
     T_tool_cam = np.linalg.inv(tip) @ _tool_camera(ctx, ws)
+    on_arm = arm_settings(ctx).look is not None  # the camera rides on the arm: turn it to each light
     lay = layout(s)
     T_mp = est.T_map_panel
     outcomes: dict[str, str] = {}
@@ -522,7 +533,7 @@ def _press(ctx: SkillContext, buttons: list[Any] | None) -> SkillGen:
         light_c = (T_mp @ np.array([spec.light[0], spec.light[1], 0.002, 1.0]))[:3]
         to_light = light_c - T_mb[:3, 3]
         to_light /= max(np.linalg.norm(to_light), 1e-9)
-        roll = _roll_to_light(path.above, kin.approach_axis, T_tool_cam, to_light)
+        roll = _roll_to_light(path.above, kin.approach_axis, T_tool_cam, to_light) if on_arm else 0.0
         R = _about_axis(kin.approach_axis, roll)
         above, pressed = path.above @ R, path.pressed @ R
         T_am = T_armbase_map(ctx)

@@ -64,10 +64,13 @@ class ButtonsSettings:
     buttons: tuple[ButtonSettings, ...] = setting(_LAB_BUTTONS, doc="the buttons as built")
     body: tuple[float, float, float] = setting((0.4, 0.3, 0.15), unit="m", gt=0,
                                                doc="panel box [width, height, depth], added to the planning scene")
-    standoff: float = setting(0.9, unit="m", gt=0.2, le=3.0,
+    standoff: float = setting(0.85, unit="m", gt=0.2, le=3.0,
                               doc="base centre to the panel face when parked in front of it")
     retry_shift: float = setting(0.05, unit="m", ge=0, le=0.3,
                                  doc="a repositioning parks this much nearer, then farther, than standoff")
+    search_locations: list[tuple[float, float, float]] = setting([], unit="m, m, rad", base_pose=True, doc=(
+        "base poses [x, y, theta] in map find_panel searches from after the current one (empty: "
+        "profile search.locations)"))
     sweep: tuple[str, ...] = setting(("look",), refers_to="named_poses",
                                      doc="arm poses the wrist camera looks from while searching for the locator")
     sweep_pan_deg: tuple[float, ...] = setting((0.0, 50.0, -50.0), unit="deg",
