@@ -99,6 +99,9 @@ class BackendSpec(Generic[Parsed]):
     fault profile runs on it); ``fault_patches[profile]`` is the patch a built-in fault
     profile adds on top of it. ``randomize_key`` is the section key a campaign sets to
     draw the world anew with each trial's seed (None: nothing to draw).
+    ``truth_key`` is the section key of the backend's per-run ground-truth file: a campaign
+    sets it to ``truth/{seed}.jsonl`` (beside DIR/config.yaml) when the config names none,
+    so every trial's truth can be scored (None: the backend keeps no truth).
     ``item_markers(section)`` lists the marker ids of the items the backend's world holds
     (``--draw item=@markers``; None: it has no such world); ``object_names(section)`` the
     names of its untagged objects (``--draw item=@objects``)."""
@@ -113,6 +116,7 @@ class BackendSpec(Generic[Parsed]):
     faults_off: Mapping[str, Any] | None = None
     fault_patches: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     randomize_key: str | None = None
+    truth_key: str | None = None
     item_markers: Callable[[Mapping[str, Any] | None], tuple[int, ...]] | None = None
     #: the section key a campaign sets to ``truth/{seed}.jsonl`` (beside DIR/config.yaml) so
     #: each trial writes its ground truth there for the campaign to count (None: no truth)

@@ -22,8 +22,8 @@ moved with the base, as the fruit lying in it (:meth:`PlantSim.carry`). Depots m
 an ArUco marker (:class:`mmexec.sim.world.Depot`), the thesis's marker-tagged basket.
 
 Ground truth (sim-only, never for skills; :class:`PlantSim`): each fruit's state,
-``plant`` (still hanging), ``held`` (in the gripper), ``robot_basket``, a depot's name
-(lying in that basket), ``floor`` or ``loose`` (anywhere else, e.g. falling), recorded in
+``plant`` (still hanging), ``held`` (in the gripper), ``robot_basket``, ``depot:NAME``
+(lying in that depot's basket), ``floor`` or ``loose`` (anywhere else, e.g. falling), recorded in
 the run's truth log (``sim.truth_log``, :mod:`mmexec.sim.truth`) as ``fruit_start`` (every
 fruit: name, class, radius, centre) and a ``fruit`` record each time a fruit's state
 changes (``t``, ``name``, ``state``, ``position``).
@@ -440,7 +440,7 @@ class PlantSim:
             T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
             T[:3, 3] = (d.pose[0], d.pose[1], 0.0)
             if _box_contains(T, d.size, pos, 0.02):
-                return d.name
+                return f"depot:{d.name}"
         return "floor" if pos[2] < self.fruit[name].radius + 0.02 else "loose"
 
     def tick(self, now: float, held_body: int | None, truth: Any = None) -> None:

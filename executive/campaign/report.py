@@ -33,6 +33,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from mmexec.executive.campaign.fruittruth import fruit_report_lines, summarize_fruit
 from mmexec.executive.campaign.trial import TrialResult
 
 __all__ = ["Z95", "summarize", "wilson_interval", "write_outputs"]
@@ -295,8 +296,14 @@ def write_outputs(out_dir: Path, identity: Mapping[str, Any], results: Sequence[
                                      "recovery": s.get("campaign", {}).get("recovery"), "trials": s["trials"],
                                      "success_rate": s["success_rate"], "success_rate_ci95": s["success_rate_ci95"]}
                                     for name, s in others]
+    fruit = summarize_fruit(out_dir, results)  # the pick_fruit figures, from the trials' truth and logs
+    if fruit is not None:
+        summary["fruit"] = fruit
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     _write_csv(out_dir / "trials.csv", results)
     plots = _plots(out_dir, results, summary, others)
-    (out_dir / "report.md").write_text(_report(identity, summary, results, plots, others))
+    report = _report(identity, summary, results, plots, others)
+    if fruit is not None:
+        report = report.rstrip("\n") + "\n" + "\n".join(fruit_report_lines(fruit)) + "\n"
+    (out_dir / "report.md").write_text(report)
     return summary

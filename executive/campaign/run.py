@@ -65,6 +65,10 @@ _IDENTITY_KEYS = ("mission", "mission_sha256", "config", "config_sha256", "seed"
                   "recovery", "randomize", "requests", "params", "request_timeout")
 
 
+#: Where a campaign has each trial's ground truth written (relative to DIR/config.yaml).
+TRUTH_SIDECAR = "truth/{seed}.jsonl"
+
+
 def _anchor_folders(cfg: dict[str, Any], loaded: LoadedConfig) -> dict[str, Any]:
     """``cfg`` with the folders the user's config names relative to itself (``roots:``,
     ``skills.paths``) written absolute, since ``DIR/config.yaml`` lies elsewhere. Each
@@ -142,6 +146,10 @@ class Campaign:
         cfg = _anchor_folders(apply_fault_profile(loaded.raw, profile, randomize=o.randomize), loaded)
         _ask_for_truth(cfg, loaded.spec.truth_key)
         randomizes = loaded.spec.randomize_key is not None  # the backend draws its world per trial
+        truth_key = loaded.spec.truth_key  # each trial's ground truth in DIR/truth/SEED.jsonl, unless the config says
+        backend_section = cfg.setdefault(str(cfg.get("backend")), {}) if truth_key is not None else None
+        if isinstance(backend_section, dict) and backend_section.get(truth_key) is None:
+            backend_section[truth_key] = TRUTH_SIDECAR
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
             self.trials_dir.mkdir(exist_ok=True)
