@@ -218,3 +218,39 @@ def test_without_a_head_the_scan_moves_the_wrist_camera_through_the_arm(sim_sect
         assert np.linalg.norm(np.array(obj["position"])[:2] - truth[:2]) < 0.03, (obj, truth)
     finally:
         r.close()
+
+
+def _search_robot(sim_section, bench_world, head_pans):
+    r = build(sim_section(f"robot: locobot_wx250s\nworld: {bench_world}\n"
+                          "camera: {width: 512, height: 384, tilt: 0.1}\n"
+                          "odometry_noise: {linear: 0.0, angular: 0.0}\n"),
+              profile={"camera": {"marker_length": MARKER_SIZE}, "search": {"head_pans": head_pans}},
+              seed=0, options={})
+    from mmexec.drivers.interfaces import Pose2D
+
+    r.core.place_base(Pose2D(1.0, 1.0, 0.9))  # the marker 0.9 rad to the right: outside the view
+    r.base.reset_estimate(Pose2D(1.0, 1.0, 0.9))
+    return r
+
+
+@pytest.mark.parametrize("head_pans", [[], [0.0, -0.9]])
+def test_search_looks_with_the_head_before_turning_the_base(sim_section, bench_world, head_pans):
+    from mmexec.skills.base import SkillContext, SkillStatus, run_skill
+    from mmexec.skills.search import search
+
+    r = _search_robot(sim_section, bench_world, head_pans)
+    try:
+        run = run_skill(search.spec, SkillContext.for_robot(r), {"marker": MARKER, "step": 30.0},
+                        step=lambda: r.spin(0.05))
+        assert run.status is SkillStatus.SUCCESS, run.failure
+        face = r.truth.item_pose("big")[:3, 3] - np.array([0.07, 0.0, 0.0])
+        assert np.linalg.norm(np.array(run.outputs["pose"][:2]) - face[:2]) < 0.02
+        turned = abs(r.truth.base_pose().theta - 0.9)
+        st = r.head.state()
+        assert (st.pan, st.tilt) == pytest.approx(r.head.home, abs=r.head.tolerance)  # back home either way
+        if head_pans:
+            assert run.outputs["views"] == 2 and turned < 1e-6 and r.head.moves == 3  # -0.9, then home
+        else:
+            assert run.outputs["views"] >= 2 and turned > 0.4 and r.head.moves == 0   # the base had to turn
+    finally:
+        r.close()
