@@ -60,6 +60,7 @@ __all__ = [
     "MonotonicClock",
     "OccupancyGrid",
     "Pose2D",
+    "ReflectorPost",
     "Robot",
     "SceneBox",
 ]
@@ -275,6 +276,13 @@ class BaseState:
     localisation the backend has); ``v`` [m/s], ``w`` [rad/s] measured velocity.
     ``faults`` names active safety conditions, e.g. ``{"bumper_left", "cliff_centre",
     "wheel_drop_right", "overcurrent_left", "link_lost"}``; any fault stops the base.
+
+    With a localiser (the run config's ``localization:``, docs/localization.md), ``pose``
+    is the odometry pose corrected by the localiser's ``map -> odom`` transform,
+    ``covariance`` its 3x3 covariance over ``(x [m], y [m], theta [rad])`` as row tuples,
+    and ``localised`` False while the filter has not converged (the pose must not be
+    trusted to drive on the map). Without one, ``covariance`` is None (no estimate of the
+    odometry's drift) and ``localised`` True: the odometry is the map pose.
     """
 
     pose: Pose2D
@@ -282,6 +290,8 @@ class BaseState:
     w: float
     stamp: float
     faults: frozenset[str] = frozenset()
+    covariance: tuple[tuple[float, float, float], ...] | None = None
+    localised: bool = True
 
 
 @dataclass(frozen=True)
@@ -460,14 +470,27 @@ class LaserScan:
 
 
 @dataclass(frozen=True)
+class ReflectorPost:
+    """A laser-reflector post (a cylinder under retro-reflective tape) at a known place:
+    ``name``, centre ``position`` ``(x, y)`` in ``map`` [m], ``radius`` [m]."""
+
+    name: str
+    position: tuple[float, float]
+    radius: float
+
+
+@dataclass(frozen=True)
 class OccupancyGrid:
     """A 2D map in ``map`` (map_server convention): ``data[row, col]`` with row 0 at
     ``origin`` y (rows grow along +y), values 0 free, 100 occupied, -1 unknown;
-    ``resolution`` [m/cell]; ``origin`` is the pose of cell (0, 0)'s corner."""
+    ``resolution`` [m/cell]; ``origin`` is the pose of cell (0, 0)'s corner.
+    ``reflectors``: the laser-reflector posts of the map (landmarks for the localiser;
+    a map file's ``reflectors:`` key, a sim world's posts), empty when it has none."""
 
     data: np.ndarray
     resolution: float
     origin: Pose2D = Pose2D()
+    reflectors: tuple[ReflectorPost, ...] = ()
 
     @property
     def width(self) -> int:

@@ -26,7 +26,7 @@ from typing import Literal, Protocol
 import numpy as np
 
 from mmexec.config.yamlload import InputError, Mark, Problems, bind, load_yaml, mark_of, read_file
-from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
+from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, ReflectorPost
 
 __all__ = [
     "FREE",
@@ -154,7 +154,8 @@ def load_map(yaml_path: str | Path) -> OccupancyGrid:
 
     Errors (missing keys, wrong types, unreadable image) raise :class:`InputError` with
     ``FILE:LINE:COL: message``. The image is flipped so that grid row 0 is the bottom
-    row of the picture (map_server convention).
+    row of the picture (map_server convention). The map's ``reflectors:`` become the
+    grid's :attr:`~mmexec.drivers.interfaces.OccupancyGrid.reflectors`.
     """
     raw = load_yaml(yaml_path)
     name = str(yaml_path)
@@ -183,7 +184,8 @@ def load_map(yaml_path: str | Path) -> OccupancyGrid:
         data[mid] = np.round(scaled[mid]).astype(np.int8)
     data = np.ascontiguousarray(data[::-1])
     ox, oy, oyaw = mf.origin
-    return OccupancyGrid(data=data, resolution=mf.resolution, origin=Pose2D(ox, oy, oyaw))
+    posts = tuple(ReflectorPost(r.name, (float(r.position[0]), float(r.position[1])), r.radius) for r in mf.reflectors)
+    return OccupancyGrid(data=data, resolution=mf.resolution, origin=Pose2D(ox, oy, oyaw), reflectors=posts)
 
 
 def pgm_bytes(grid: OccupancyGrid, comment: str = "") -> bytes:

@@ -88,7 +88,7 @@ BUILTIN_SKILL_MODULES: tuple[str, ...] = (
     "mmexec.skills.perception.scan",
     "mmexec.skills.primitives", "mmexec.skills.operator", "mmexec.skills.navigation.navigate",
     "mmexec.skills.navigation.approach", "mmexec.skills.search", "mmexec.skills.perception.detect",
-    "mmexec.skills.manipulation.arm", "mmexec.skills.fetch",
+    "mmexec.skills.manipulation.arm", "mmexec.skills.fetch", "mmexec.skills.localization.skill",
     "mmexec.skills.buttons",
     "mmexec.skills.manipulation.holistic_skill",
     "mmexec.skills.fruit",
@@ -122,6 +122,9 @@ class RunConfig:
     #: ``mmexec serve`` settings (token file, CORS origins, body cap, stream rates), bound
     #: by :func:`mmexec.executive.serve.settings.parse_section`
     serve: Any = None
+    #: the localiser (AMCL on the robot's lidar and odometry, docs/localization.md), bound
+    #: by :func:`mmexec.skills.localization.localizer.parse_section`; None: odometry only
+    localization: Any = None
     #: more folders (relative to the config file) that mission includes and world files
     #: may come from, besides the mission's folder, trees/ and sim/worlds/
     roots: list[str] = field(default_factory=list)
@@ -261,6 +264,10 @@ def load_config(path: str | Path) -> LoadedConfig:
     except InputError as e:
         problems.extend(e.problems)
     _check_paths(p, cfg, raw, spec, problems)
+    try:
+        localization_settings(cfg, raw)
+    except InputError as e:
+        problems.extend(e.problems)
     problems.raise_if_any()
     assert spec is not None
     digest = hashlib.sha256(data).hexdigest()
@@ -349,7 +356,25 @@ def build_robot(
         raise loaded.relocate(e) from None
     if not isinstance(robot, Robot):
         raise TypeError(f"backend {loaded.backend!r} builder returned {type(robot).__name__}, not a Robot")
+    settings = localization_settings(loaded.config, loaded.raw)
+    if settings is not None:
+        from mmexec.skills.localization.localizer import localise_robot
+
+        try:
+            robot = localise_robot(robot, settings, seed=seed)
+        except ValueError as e:
+            robot.close()
+            raise InputError.at(loaded.mark("localization"), f"localization: {e}") from None
     return robot
+
+
+def localization_settings(cfg: RunConfig, raw: YDict) -> Any:
+    """The config's ``localization:`` section bound
+    (:class:`~mmexec.skills.localization.localizer.LocalizationSettings`), None without
+    one; InputError with its problems located."""
+    from mmexec.skills.localization.localizer import parse_section
+
+    return parse_section(cfg.localization, raw.value_mark("localization"))
 
 
 def check_options(loaded: LoadedConfig, options: Mapping[str, Any]) -> None:

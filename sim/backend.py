@@ -47,6 +47,7 @@ from mmexec.drivers.interfaces import (
     CapabilityError,
     OccupancyGrid,
     Pose2D,
+    ReflectorPost,
     Robot,
 )
 from mmexec.sim.capabilities import (
@@ -227,6 +228,12 @@ def _check_fault_items(cfg: SimSection, world: World, section: Any) -> None:
     problems.raise_if_any()
 
 
+def world_reflectors(world: World) -> tuple[ReflectorPost, ...]:
+    """The world's laser-reflector posts, as the map the robot is given lists them."""
+    return tuple(ReflectorPost(r.name, (float(r.position[0]), float(r.position[1])), r.radius)
+                 for r in world.spec.reflectors)
+
+
 def _map_clearance(grid: OccupancyGrid) -> Callable[[float, float, float], bool]:
     """``clear(x, y, r)``: whether a disk of radius ``r`` [m] at map point ``(x, y)`` lies in
     ``grid`` and away from its occupied cells (to within a cell)."""
@@ -301,7 +308,7 @@ class SimRobot(Robot):
         self.recorder = recorder
         self.clock = core.clock
         self.profile = profile
-        self.occupancy = world.occupancy(0.05)
+        self.occupancy = replace(world.occupancy(0.05), reflectors=world_reflectors(world))
         self.scene = world.scene_boxes()
         info = core.info
         self.base = SimBase(core, cfg.odometry_noise.model(), info.bump_links)
@@ -589,6 +596,8 @@ FAULT_PATCHES: dict[str, dict[str, Any]] = {
     # (mmexec.sim.truth) written to DIR/truth/SEED.jsonl beside DIR/config.yaml
     "crowd": {"faults": {"crowd": {}}, "truth_log": "truth/{seed}.jsonl"},
     "clutter": {"faults": {"clutter": {}}, "truth_log": "truth/{seed}.jsonl"},
+    # not a fault but the drift of a real base's odometry, for the localisation campaigns
+    "realistic_odometry": {"odometry_noise": {"profile": "realistic"}},
 }
 
 #: The ``sim`` backend, as the executive's registry sees it.

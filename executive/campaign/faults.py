@@ -80,6 +80,8 @@ BUILTIN_PROFILES: dict[str, str] = {
              "at 0.3-1.2 m/s; each trial's ground truth in DIR/truth/SEED.jsonl)",
     "clutter": "boxes the map does not show stand near the robot's routes, a way through always left (sim only: "
                "sim.faults.clutter, 3 boxes; ground truth in DIR/truth/SEED.jsonl)",
+    "realistic_odometry": "the odometry drifts as a real base's does (sim only: sim.odometry_noise.profile "
+                          "realistic: wheel-radius and gyro scale errors, gyro bias, slip); for the localiser",
 }
 
 #: joins profiles in ``--faults`` (``crowd+arm_fail_first``)

@@ -151,6 +151,9 @@ class ParticleFilter:
         self._force = False
         #: the last reflector fix (None when the last scan matched fewer than three)
         self.last_fix: ReflectorFix | None = None
+        #: the mean scan likelihood over the particles at the last update (what w_slow and
+        #: w_fast average; 0 before the first update)
+        self.last_likelihood = 0.0
         self._estimate: Estimate | None = None
 
     # ------------------------------------------------------------------ initialisation
@@ -169,13 +172,13 @@ class ParticleFilter:
     def global_localisation(self) -> None:
         """Spread ``max_particles`` uniformly over the free map (ROS ``global_localization``)."""
         self._reset(self._uniform(self.cfg.max_particles))
-        self._force = True
 
     def _reset(self, particles: np.ndarray) -> None:
         self.particles = particles
         self.weights = np.full(len(particles), 1.0 / len(particles))
         self._w_slow = self._w_fast = 0.0
         self._estimate = None
+        self._force = True  # the next scan updates, moved or not
 
     def _uniform(self, n: int) -> np.ndarray:
         if len(self._free_cells) == 0:
@@ -215,8 +218,7 @@ class ParticleFilter:
         if self._odom is None:
             self._odom = odom
             self._force = True
-        _, trans, _ = odometry_step(self._odom, odom)
-        moved = trans >= self.cfg.update_min_d or abs(float(wrap(odom[2] - self._odom[2]))) >= self.cfg.update_min_a
+        moved = self._moved(odom)
         if not (moved or self._force):
             return False
         if moved:
@@ -230,6 +232,18 @@ class ParticleFilter:
         self._estimate = None
         return True
 
+    def _moved(self, odom: np.ndarray) -> bool:
+        """Whether odometry pose ``odom`` is ``update_min_d`` / ``update_min_a`` from the
+        one at the last update."""
+        assert self._odom is not None
+        _, trans, _ = odometry_step(self._odom, odom)
+        return trans >= self.cfg.update_min_d or abs(float(wrap(odom[2] - self._odom[2]))) >= self.cfg.update_min_a
+
+    def wants_update(self, odom: np.ndarray | tuple[float, float, float]) -> bool:
+        """Whether :meth:`update` at odometry pose ``odom`` would update the filter (so a
+        caller can skip taking a scan it would ignore)."""
+        return self._odom is None or self._force or self._moved(np.asarray(odom, dtype=np.float64))
+
     def _correct(self, ranges: np.ndarray, angles: np.ndarray, range_max: float, intensities: np.ndarray | None) -> None:
         r, a = self.field.beam_subset(np.asarray(ranges, dtype=np.float64), np.asarray(angles, dtype=np.float64), range_max)
         lik = self.field.scan_likelihood(self.particles, r, a, range_max, self.mount)
@@ -238,6 +252,7 @@ class ParticleFilter:
         # w_slow / w_fast track the average measurement likelihood (before the reflectors,
         # which are a different measurement: a kidnapped robot must still look unlikely).
         w_avg = float(np.mean(lik))
+        self.last_likelihood = w_avg
         if self._w_slow == 0.0:
             self._w_slow = self._w_fast = w_avg
         else:

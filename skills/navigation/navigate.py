@@ -205,12 +205,17 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
     and publishes the path under ``nav.path``. Failures: PLANNING "no path to LABEL";
     EXECUTION on a base fault (bumper, cliff, link; with the local planner only once its
     contact recoveries are spent) or after ``timeout`` clock seconds; PRECONDITION for the
-    local planner without a lidar. Cancellation brakes the base before re-raising.
+    local planner without a lidar, and "not localised" while the robot's localiser has not
+    converged (``BaseState.localised``; docs/localization.md). When the localised pose
+    jumps on the way (the localiser found the robot elsewhere, e.g. after a kidnap), the
+    plain drive brakes and plans again from the new pose (``nav_replan``, at most
+    :data:`MAX_JUMP_REPLANS` times). Cancellation brakes the base before re-raising.
     Returns the pose reached."""
     base = ctx.robot.base
     if base is None:
         raise SkillFailure(FailureKind.PRECONDITION, "navigation needs a base, and this robot has none")
     cm = costmap(ctx)
+    _require_localised(ctx, base, label)
     if nav_settings(ctx).local_planner:
         lidar = ctx.robot.lidar
         if lidar is None:
@@ -221,43 +226,103 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
         drive = LocalDrive(ctx, base, lidar, goal, label, config=local_drive_config(ctx, base, max_v), static=cm,
                            timeout=timeout, path=path, status=base_status)
         return (yield from drive.run())
-    start = base.state().pose
     if path is None:
         goal = _free_goal(ctx, cm, goal, label)
-        path = plan_path(cm, (start.x, start.y), (goal.x, goal.y))
-        if path is None:
-            base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="no path")
-            base_status(ctx, "idle")
-            raise SkillFailure(FailureKind.PLANNING, f"no path to {label} ({goal.x:.2f}, {goal.y:.2f})")
-        path = simplify_path(cm, path)
-    # the grid path runs between cell centres: start and end exactly where the base and goal are
-    path = [(start.x, start.y)] + list(path[1:-1]) + [(goal.x, goal.y)] if len(path) > 1 else [(goal.x, goal.y)]
-    ctx.world[WORLD_PATH] = [[float(x), float(y)] for x, y in path]
-    tracker = PathTracker(path, _tracker_config(ctx, base, max_v), goal_heading=goal.theta)
-    base_status(ctx, "to_goal", goal=[round(goal.x, 3), round(goal.y, 3), round(goal.theta, 3)], label=label)
+    given = path
     t_end = ctx.clock.now() + timeout
-    last = ctx.clock.now()
-
-    def step(st: BaseState, now: float) -> tuple[float, float] | Step:
-        """The tracker's command, once per clock step (none while the clock stands)."""
-        nonlocal last
-        dt = now - last
-        if dt <= 0:
-            return Step.HOLD
-        last = now
-        v, w, done = tracker.step(st.pose, st.v, st.w, dt)
-        return Step.ARRIVED if done else (v, w)
-
     try:
-        yield from motion_loop(ctx, base, step, fault=f"base fault on the way to {label}", deadline=t_end,
-                               timeout=f"not at {label} after {timeout:g} s",
-                               on_failure=lambda reason: base_status(ctx, "goal_fail", reason=reason))
+        for replan in range(MAX_JUMP_REPLANS + 1):
+            start = base.state().pose
+            path = given if given is not None and replan == 0 else _plan(ctx, cm, start, goal, label)
+            # the grid path runs between cell centres: start and end exactly where the base and goal are
+            path = [(start.x, start.y)] + list(path[1:-1]) + [(goal.x, goal.y)] if len(path) > 1 else [(goal.x, goal.y)]
+            ctx.world[WORLD_PATH] = [[float(x), float(y)] for x, y in path]
+            tracker = PathTracker(path, _tracker_config(ctx, base, max_v), goal_heading=goal.theta)
+            if replan == 0:
+                base_status(ctx, "to_goal", goal=[round(goal.x, 3), round(goal.y, 3), round(goal.theta, 3)],
+                            label=label)
+            jumped = yield from _track(ctx, base, tracker, label, timeout, t_end, replan < MAX_JUMP_REPLANS)
+            if jumped is None:
+                break
+            if math.isnan(jumped):  # the localiser lost the map on the way: stopped
+                base_status(ctx, "goal_fail", reason="not localised")
+                raise SkillFailure(FailureKind.EXECUTION, f"lost localisation on the way to {label}: the scans no "
+                                   "longer match the map at the estimated pose (stopped; run 'localize')")
+            ctx.emit("nav_replan", label=label, reason="the localised pose jumped", jump=round(jumped, 3),
+                     node=ctx.node_path)
         reached = base.state().pose
         base_status(ctx, "goal_ok", pose=[round(reached.x, 3), round(reached.y, 3), round(reached.theta, 3)])
         return reached
     finally:
         ctx.world[WORLD_PATH] = []
         base_status(ctx, "idle")
+
+
+#: a pose change between two ticks this much larger than the base's motion could explain
+#: ([m], [rad]) is the localiser correcting the pose (a re-localisation after a kidnap):
+#: the path, planned from where the base was believed to be, is planned again
+POSE_JUMP = (0.15, 0.15)
+#: re-plans after pose jumps within one drive
+MAX_JUMP_REPLANS = 3
+
+
+def _require_localised(ctx: SkillContext, base: Base, label: str) -> None:
+    """PRECONDITION failure when the localiser runs and has not converged: a drive on the
+    map from a pose the filter does not know (run ``localize`` first)."""
+    st = base.state()
+    if st.localised:
+        return
+    c = st.covariance
+    sd = f" (position spread {math.sqrt(max(c[0][0], c[1][1])):.2f} m)" if c is not None else ""
+    base_status(ctx, "goal_fail", reason="not localised")
+    base_status(ctx, "idle")
+    raise SkillFailure(FailureKind.PRECONDITION,
+                       f"not localised: the localiser has not converged{sd}; not driving to {label} "
+                       "(run 'localize' first)")
+
+
+def _plan(ctx: SkillContext, cm: CostMap, start: Pose2D, goal: Pose2D, label: str) -> list[tuple[float, float]]:
+    """The simplified A* path from ``start`` to ``goal``; PLANNING failure when none."""
+    path = plan_path(cm, (start.x, start.y), (goal.x, goal.y))
+    if path is None:
+        base_status(ctx, "goal_fail", goal=[goal.x, goal.y, goal.theta], reason="no path")
+        raise SkillFailure(FailureKind.PLANNING, f"no path to {label} ({goal.x:.2f}, {goal.y:.2f})")
+    return simplify_path(cm, path)
+
+
+def _track(ctx: SkillContext, base: Base, tracker: PathTracker, label: str, timeout: float, t_end: float,
+           watch_jumps: bool) -> Generator[None, None, float | None]:
+    """Follow ``tracker``'s path to the end (None), or, with ``watch_jumps``, until the
+    localised pose jumps (:data:`POSE_JUMP`): brake and return the jump [m]; brake and
+    return NaN when the base stops being localised."""
+    last = ctx.clock.now()
+    prev: BaseState | None = None
+    jump: float | None = None
+
+    def step(st: BaseState, now: float) -> tuple[float, float] | Step:
+        """The tracker's command, once per clock step (none while the clock stands)."""
+        nonlocal last, prev, jump
+        dt = now - last
+        if dt <= 0:
+            return Step.HOLD
+        last = now
+        if not st.localised:
+            jump = math.nan
+            return Step.ARRIVED
+        if watch_jumps and prev is not None:
+            moved = prev.pose.distance_to(st.pose) - max(abs(prev.v), abs(st.v)) * dt
+            turned = abs(wrap_angle(st.pose.theta - prev.pose.theta)) - max(abs(prev.w), abs(st.w)) * dt
+            if moved > POSE_JUMP[0] or turned > POSE_JUMP[1]:
+                jump = prev.pose.distance_to(st.pose)
+                return Step.ARRIVED
+        prev = st
+        v, w, done = tracker.step(st.pose, st.v, st.w, dt)
+        return Step.ARRIVED if done else (v, w)
+
+    yield from motion_loop(ctx, base, step, fault=f"base fault on the way to {label}", deadline=t_end,
+                           timeout=f"not at {label} after {timeout:g} s",
+                           on_failure=lambda reason: base_status(ctx, "goal_fail", reason=reason))
+    return jump
 
 
 def _free_goal(ctx: SkillContext, cm: CostMap, goal: Pose2D, label: str) -> Pose2D:
@@ -387,7 +452,9 @@ def navigate(ctx: SkillContext, goal: str | None = None, x: float | None = None,
     """Drive the base to a named pose or x/y/theta: A* on the occupancy map inflated by
     the robot radius, then path tracking (with ``nav.local_planner``: the local planner,
     which re-plans, recovers and backs off from contacts). PLANNING "no path to ..." when
-    A* finds none; EXECUTION on a bumper or other base fault, or on timeout."""
+    A* finds none; EXECUTION on a bumper or other base fault, or on timeout;
+    PRECONDITION "not localised: ..." while the localiser has not converged (the mission's
+    recovery runs ``localize``)."""
     pose, label = _goal_from_params(ctx, goal, x, y, theta)
     limit = timeout if timeout is not None else nav_settings(ctx).timeout
     reached = yield from drive_path(ctx, pose, label, timeout=limit, max_v=max_speed)
