@@ -395,16 +395,6 @@ class GripperState:
 
 
 @dataclass(frozen=True)
-class CameraIntrinsics:
-    """Pinhole intrinsics in pixels; ``dist`` are OpenCV distortion coefficients."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-@dataclass(frozen=True)
 class HeadState:
     """Pan/tilt head state at ``stamp`` [s, clock time], measured: ``pan`` [rad] about the
     head's vertical axis (positive turns the camera left, CCW seen from above), ``tilt``
@@ -419,6 +409,16 @@ class HeadState:
     fault: str = ""
 
 
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics in pixels; ``dist`` are OpenCV distortion coefficients."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
     dist: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
     def matrix(self) -> np.ndarray:
@@ -639,29 +639,6 @@ class Camera(abc.ABC):
         """
 
 
-class Lidar(abc.ABC):
-    """A planar 360 degree scanner."""
-
-    @abc.abstractmethod
-    def scan(self) -> LaserScan | None:
-        """The latest scan, or None when none is available."""
-
-
-class Robot(abc.ABC):
-    """A backend: the capabilities of one robot plus the loop hooks the runner needs.
-
-    Absent capabilities are None (a fixed arm has no ``base``).
-    ``profile`` is the robot profile from the config (named poses, mounts, skill
-    defaults); its content is read by skills, not by the executive.
-    ``description`` is the robot model's description (:mod:`mmexec.drivers.descriptions`:
-    kinematics, limits, tool and grasp links, collision model), set by the backend from
-    its config; None when the config names none. Skills take model facts from it and
-    never decide by a model's name.
-    """
-
-    name: str = "robot"
-    description: RobotDescription | None = None
-    clock: Clock
 class Head(abc.ABC):
     """A pan/tilt head carrying the camera (the LoCoBot's; None on a robot without one).
 
@@ -728,11 +705,36 @@ class Head(abc.ABC):
         """Cancel any move and hold where the head is."""
 
 
+class Lidar(abc.ABC):
+    """A planar 360 degree scanner."""
+
+    @abc.abstractmethod
+    def scan(self) -> LaserScan | None:
+        """The latest scan, or None when none is available."""
+
+
+class Robot(abc.ABC):
+    """A backend: the capabilities of one robot plus the loop hooks the runner needs.
+
+    Absent capabilities are None (a fixed arm has no ``base``).
+    ``profile`` is the robot profile from the config (named poses, mounts, skill
+    defaults); its content is read by skills, not by the executive.
+    ``description`` is the robot model's description (:mod:`mmexec.drivers.descriptions`:
+    kinematics, limits, tool and grasp links, collision model), set by the backend from
+    its config; None when the config names none. Skills take model facts from it and
+    never decide by a model's name.
+    """
+
+    name: str = "robot"
+    description: RobotDescription | None = None
+    clock: Clock
     base: Base | None = None
     arm: Arm | None = None
     gripper: Gripper | None = None
     camera: Camera | None = None
     lidar: Lidar | None = None
+    #: the camera's pan/tilt head (the LoCoBot's); None on a robot without one
+    head: Head | None = None
     profile: dict[str, Any]
     #: prior knowledge of the environment, in ``map``: a navigation map (from the world in
     #: sim, from a map_server PGM + YAML on the robot) and static boxes for arm planning.
@@ -756,8 +758,6 @@ class Head(abc.ABC):
             except Exception:
                 import logging
 
-    #: the camera's pan/tilt head (the LoCoBot's); None on a robot without one
-    head: Head | None = None
                 logging.getLogger(__name__).exception("safe_stop: %s.stop() failed", cap)
 
     def close(self) -> None:
