@@ -60,8 +60,8 @@ from mmexec.sim.capabilities import (
     SimClock,
     SimCore,
     SimGripper,
-    SimLidar,
     SimHead,
+    SimLidar,
 )
 from mmexec.sim.clearance import ClearanceMap
 from mmexec.sim.faults import FaultConfig, FaultInjector, world_extras
@@ -323,6 +323,7 @@ class SimRobot(Robot):
             mount[:3, :3] = np.array(p.getMatrixFromQuaternion(p.getQuaternionFromEuler((r, pp, yw)))).reshape(3, 3)
             mount[:3, 3] = (x, y, z)
         self.camera = SimCamera(core, intr, cfg.camera.near, cfg.camera.far, cfg.camera.noise, self.base, mount)
+        self.head: SimHead | None = None
         if info.pan_tilt_joints:
             # the head starts (and its home is) at sim.camera.pan/tilt
             self.head = SimHead(core, (cfg.camera.pan, cfg.camera.tilt), HeadModel.of(self.description))
@@ -332,7 +333,6 @@ class SimRobot(Robot):
                               reflectors=frozenset(r.name for r in world.spec.reflectors),
                               noise_fraction=lid.noise_fraction, quality=lid.quality)
         self.truth = SimTruth(self)  #: SIM-ONLY ground truth (tests, campaign scoring)
-        self.head: SimHead | None = None
         core.clearance = ClearanceMap.from_world(world, *self.base.bump_heights)
         self._item_radius = {it.name: 0.5 * math.sqrt(sum(x * x for x in it.size)) for it in world.spec.items}
         if scene_handles.plants is not None:  # the fruit are items too (the gripper holds them)
@@ -398,6 +398,8 @@ class SimRobot(Robot):
             if not rest:
                 self.arm.update(dt)
                 self.gripper.update(dt)
+                if self.head is not None:
+                    self.head.update(dt)
                 core.sync()
                 p.stepSimulation(physicsClientId=self.cid)
                 self.physics_steps += 1
@@ -408,8 +410,6 @@ class SimRobot(Robot):
                 core.sync()
                 tp = core.true_pose
                 self.recorder.sample(self.clock.now(), (tp.x, tp.y), tp.theta)
-                if self.head is not None:
-                    self.head.update(dt)
         if self.scene_handles.plants is not None:  # magnets pulled off let go; fruit truth
             self.scene_handles.plants.tick(self.clock.now(), core.held_body, self.truth_log)
         if self.truth_log is not None:
