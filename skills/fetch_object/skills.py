@@ -2,8 +2,9 @@
 again, let the operator correct a dangerous item's grasp, pick it (docs/fetch_object.md).
 
 * ``find_object``: the catalogue's likely places first, then the general search locations
-  (:func:`~mmexec.skills.catalogue.search_order`); at each, views at the profile's
-  headings, ``frames`` predictions each, fused; the target goes to the world model.
+  (:func:`~mmexec.skills.catalogue.search_order`); at each, at the profile's base
+  headings, a ``scan`` (the head's or the wrist's camera positions, two predictions
+  each, fused in map); the target goes to the world model.
 * ``approach_object``: a stand-off facing the object from its support's free side (the
   marker normal's counterpart: the direction from the object to the nearest free cell of
   the map, i.e. perpendicular to the support's nearest edge), at the grasp mode's
@@ -93,6 +94,7 @@ from mmexec.skills.perception.grasp_point import (
     estimate_grasp,
     move_grasp,
 )
+from mmexec.skills.perception.scan import WORLD_OBJECT_DETECTOR, WORLD_SCAN, ScanResult, scan
 from mmexec.skills.primitives import brake
 from mmexec.skills.search import search_settings
 
@@ -237,6 +239,35 @@ def look_for(ctx: SkillContext, item: CatalogueItem, frames: int) -> Generator[N
     return ObjectTarget(item, d, g, frame, centre, float(np.linalg.norm(g.centre - cam_xy)), len(centres))
 
 
+def scan_for(ctx: SkillContext, item: CatalogueItem) -> Generator[None, None, ObjectTarget | None]:
+    """The ``scan`` skill (skills/perception/scan.py) where the robot stands, with this
+    mission's detector: the profile's ``scan`` camera positions (head poses, or wrist
+    poses; one view without either), ``scan.predictions`` each, fused in map. The target:
+    the most confident object of the item's class, its grasp point from the box and
+    depth of its most confident prediction, its centre the fused mean. None when the
+    scan saw none."""
+    ctx.world[WORLD_OBJECT_DETECTOR] = detector(ctx)
+    try:
+        yield from scan(ctx, label=item.detector_class, size=list(item.size))
+    except SkillFailure as e:
+        if e.kind is not FailureKind.EXECUTION or not e.reason.startswith("no "):
+            raise
+        return None
+    res = ctx.world.get(WORLD_SCAN)
+    obj = res.best(item.detector_class) if isinstance(res, ScanResult) else None
+    if obj is None:
+        return None
+    best = obj.best
+    try:
+        g = estimate_grasp(best.frame, best.box, size=item.size)
+    except GraspPointError as e:
+        log.info("%s: no grasp point from the scan's best box %s: %s", item.name, best.box, e)
+        return None
+    cam = (best.frame.T_map_base @ best.frame.T_base_camera)[:3, 3]
+    return ObjectTarget(item, Detection(obj.label, obj.confidence, best.box), g, best.frame, obj.position,
+                        float(np.linalg.norm(g.centre - cam)), obj.seen)
+
+
 def _record(ctx: SkillContext, t: ObjectTarget, where: str) -> None:
     ctx.world[WORLD_TARGET] = t
     ctx.emit("object_estimate", item=t.item.name, label=t.detection.label, confidence=round(t.detection.confidence, 3),
@@ -288,7 +319,7 @@ def find_object(ctx: SkillContext, item: str, timeout: float = 400.0) -> SkillGe
                 yield from rotate_by(ctx, turn)
             yield from _settle(ctx, prof.settle_time)
             views += 1
-            t = yield from look_for(ctx, it, prof.frames)
+            t = yield from scan_for(ctx, it)
             if t is not None:
                 _record(ctx, t, stop.name)
                 ctx.emit("object_found", item=it.name, place=stop.name, likely=stop.likely, views=views,
