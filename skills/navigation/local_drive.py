@@ -103,6 +103,14 @@ BACK_OFF_SPEED = 0.1
 #: [m] room beyond the footprint a recovery needs round the base to turn once round: an
 #: arm held out (carrying) reaches past the footprint, and swept into furniture it hit it
 RECOVERY_TURN_ROOM = 0.25
+#: [m] after a stuck recovery, re-plans first try with the non-person circles this much
+#: wider (:meth:`LocalPlanner.replan_grid`), so a gap the base stood in is left out when
+#: there is another way
+STUCK_WIDEN = 0.15
+#: [m] how far outside the filter's zone a moved goal lies beyond the look-ahead
+#: (:meth:`LocalDrive._leave_zones`): the barrier sits at the look-ahead point, so at a goal
+#: only ``l`` outside the zone the base could not turn towards the obstacle
+ZONE_SLACK = 0.05
 
 
 @dataclass(frozen=True)
@@ -113,7 +121,9 @@ class LocalDriveConfig:
     path; ``recoveries`` (stuck recoveries, and contacts, before failing);
     ``back_off`` [m] how far a recovery backs off; ``heading_tolerance`` [rad] at the
     goal; ``goal_search`` [m] how far a goal an obstacle covers may move (0: fail);
-    ``tracker`` the docking tracker's limits and tolerances, ``dock_distance`` [m] how
+    ``zone_goal_search`` [m] how far a goal inside the zone the filter guards round an
+    obstacle the map does not show may move (a box standing on a search viewpoint: the
+    base could never get there; 0: fail); ``tracker`` the docking tracker's limits and tolerances, ``dock_distance`` [m] how
     close to the goal docking starts."""
 
     planner: LocalPlannerConfig
@@ -124,6 +134,7 @@ class LocalDriveConfig:
     back_off: float = 0.2
     heading_tolerance: float = 0.04
     goal_search: float = 0.3
+    zone_goal_search: float = 0.6
     dock_distance: float = 0.5
 
 
@@ -195,6 +206,7 @@ class LocalDrive:
                  path: list[tuple[float, float]] | None, status: Callable[..., None]) -> None:
         self.ctx, self.base, self.lidar = ctx, base, lidar
         self.goal, self.label, self.config = goal, label, config
+        self._asked = goal  # the goal asked for (self.goal may move out of an obstacle's zone)
         self.static, self.timeout, self.status = static, timeout, status
         self.planner = local_planner(ctx, config.planner)
         self._given_path = path
@@ -205,13 +217,14 @@ class LocalDrive:
         self.contacts = 0
         self.replans = 0
         self._no_way = False  # the last re-plan found no way to the goal
+        self._widen = 0.0  # [m] re-plans widen the circles by this (after a stuck recovery)
         self._path: list[tuple[float, float]] | None = None
         self._best, self._t_best = math.inf, ctx.clock.now()  # progress: least path length left, and when
         self._deadline = ctx.clock.now() + timeout
         self._people_shown = False
 
     # ------------------------------------------------------------------ planning
-    def _inflated(self, now: float) -> CostMap:
+    def _inflated(self, now: float, widen: float = 0.0) -> CostMap:
         """The map to plan on now: the static one, or with what the lidar and the
         contact sensors found written in (when they found anything), except under the
         base's own footprint: the base stands there, so what was marked there (the trail
@@ -222,7 +235,7 @@ class LocalDrive:
         if not cm.marks.any() and not np.any(~tracks.person):
             return self.static
         lim = self.config.planner.limits
-        grid = self.planner.replan_grid(now)
+        grid = self.planner.replan_grid(now, widen)
         pose = self.base.state().pose
         data = np.array(grid.data, copy=True)
         rows, cols = np.indices(data.shape)
@@ -242,6 +255,21 @@ class LocalDrive:
         when there is no way."""
         start = self.base.state().pose
         cm = self.static if on_static else self._inflated(now)
+        if not on_static:
+            self._leave_zones(cm, now)
+            if self._widen > 0.0:
+                # stuck before: keep out of gaps between obstacles the map does not show
+                # that are only just wide enough (the DWA and the filter stood in one), if
+                # there is another way
+                path = self._plan_on(self._inflated(now, self._widen), start, why, log_none=False)
+                if path is not None:
+                    return path
+        return self._plan_on(cm, start, why)
+
+    def _plan_on(self, cm: CostMap, start: Pose2D, why: str, *, log_none: bool = True) -> list[tuple[float, float]] | None:
+        """A* on ``cm`` from ``start`` to the goal (moved to a free point within
+        ``goal_search`` when ``cm`` covers it), simplified; None (logged unless not
+        ``log_none``) when there is no way."""
         gx, gy = self.goal.x, self.goal.y
         if not cm.is_free(gx, gy) and self.config.goal_search > 0:
             free = cm.nearest_free(gx, gy, self.config.goal_search)
@@ -249,7 +277,8 @@ class LocalDrive:
                 gx, gy = free
         grid_path = plan_path(cm, (start.x, start.y), (gx, gy)) if cm.is_free(gx, gy) else None
         if grid_path is None:
-            self.ctx.emit("nav_plan", why=why, found=False, label=self.label, node=self.ctx.node_path)
+            if log_none:
+                self.ctx.emit("nav_plan", why=why, found=False, label=self.label, node=self.ctx.node_path)
             return None
         grid_path = simplify_path(cm, grid_path)
         return [(start.x, start.y), *grid_path[1:-1], (gx, gy)] if len(grid_path) > 1 else [(gx, gy)]
@@ -314,6 +343,42 @@ class LocalDrive:
         d = np.hypot(c.centres[:, 0] - self.goal.x, c.centres[:, 1] - self.goal.y)
         inside = d < c.safety_radii + self.config.planner.cbf.lookahead
         return float(d[inside].min()) if inside.any() else None
+
+    def _leave_zones(self, cm: CostMap, now: float) -> bool:
+        """A goal inside the zone the filter guards round a non-person circle (an
+        obstacle the map does not show, standing on or beside the goal; the zone here is
+        the circle's safety radius plus twice the look-ahead and :data:`ZONE_SLACK`, so
+        the base can also turn at the goal) is one the base never reaches: move it to the
+        nearest point within ``zone_goal_search`` of the goal asked for that lies outside
+        every such zone and is free on ``cm`` (logged ``nav_goal_moved``). True when the
+        goal moved. A goal left where it is fails after the recoveries, saying why."""
+        limit = self.config.zone_goal_search
+        c = self.planner.circles_at(now)
+        c = c.select(~c.person)
+        if limit <= 0 or not len(c):
+            return False
+        zone = c.safety_radii + 2.0 * self.config.planner.cbf.lookahead + ZONE_SLACK
+        if np.all(np.hypot(c.centres[:, 0] - self.goal.x, c.centres[:, 1] - self.goal.y) >= zone):
+            return False
+        asked = self._asked
+        rings = np.arange(1, round(limit / 0.05) + 1) * 0.05
+        ang = np.linspace(-math.pi, math.pi, 32, endpoint=False)
+        here = self.base.state().pose
+        for r in rings:
+            xs, ys = asked.x + r * np.cos(ang), asked.y + r * np.sin(ang)
+            d = np.hypot(xs[:, None] - c.centres[:, 0], ys[:, None] - c.centres[:, 1])
+            free = [k for k in np.flatnonzero(np.all(d >= zone, axis=1)) if cm.is_free(float(xs[k]), float(ys[k]))]
+            if free:
+                k = min(free, key=lambda k: math.hypot(xs[k] - here.x, ys[k] - here.y))
+                old = self.goal
+                self.goal = Pose2D(float(xs[k]), float(ys[k]), old.theta)
+                self.ctx.emit("nav_goal_moved", label=self.label, goal=_rounded([asked.x, asked.y]),
+                              to=_rounded([self.goal.x, self.goal.y]), by=round(float(r), 3),
+                              node=self.ctx.node_path)
+                log.info("%s: goal moved %.2f m (from %.2f, %.2f), out of the zone round an obstacle the map "
+                         "does not show", self.label, r, old.x, old.y)
+                return True
+        return False
 
     def _restart_progress(self, now: float) -> None:
         self._best, self._t_best = math.inf, now
@@ -523,7 +588,12 @@ class LocalDrive:
             elif self._giving_way(circles, st.pose):
                 t_best += dt
             elif now - t_best > self.config.planner.dwa.stuck_time:
-                yield from self._recover("docking held back by the safety filter")
+                yield from brake(ctx, base)
+                if self._leave_zones(self._inflated(now), now):  # the obstacle turned out bigger
+                    self._replan(now, "goal moved")
+                else:
+                    yield from self._recover("docking held back by the safety filter")
+                self.planner.reset_command()
                 return False
             u = (v, w)
             base.set_velocity(v, w)
@@ -635,6 +705,8 @@ class LocalDrive:
                              f"stuck on the way to {self.label} after {self.config.recoveries} recoveries "
                              f"(rotate, back off, re-plan): {why}", "stuck")
         pose = self.base.state().pose
+        if why.startswith("stuck"):
+            self._widen = STUCK_WIDEN
         ctx.emit("nav_recovery", attempt=self.recoveries, of=self.config.recoveries, why=why,
                  pose=_rounded([pose.x, pose.y, pose.theta]), node=ctx.node_path)
         log.info("%s: recovery %d of %d (%s)", self.label, self.recoveries, self.config.recoveries, why)

@@ -157,13 +157,14 @@ class LocalPlanner:
         c = self._tracks
         return replace(c, centres=c.at_time(max(0.0, now - self._t_tracks)))
 
-    def replan_grid(self, now: float) -> OccupancyGrid:
+    def replan_grid(self, now: float, widen: float = 0.0) -> OccupancyGrid:
         """The map to re-plan on when the path is blocked: the static map, the costmap's
         marks and the non-person circles (as discs of their covering radius plus the
         filter's look-ahead, so that the inflated map keeps the planned path out of the
-        zone the filter guards)."""
+        zone the filter guards; plus ``widen`` [m], to leave out a gap the base could not
+        pass)."""
         c = self.circles_at(now).select(~self._tracks.person)
-        return self.costmap.merged_grid(c.centres, c.radii + self.config.cbf.lookahead)
+        return self.costmap.merged_grid(c.centres, c.radii + self.config.cbf.lookahead + widen)
 
     def step(self, pose: Pose2D, v_meas: float, w_meas: float, now: float, dt: float,
              scan: LaserScan | None = None) -> LocalCommand:

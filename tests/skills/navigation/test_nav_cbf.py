@@ -245,8 +245,8 @@ def test_tight_spaces_switch_alpha_and_lambda():
     two = _circles([[0.0, 0.7], [0.0, -0.7]], 0.5)        # a passage: both gaps 0.2 m
     a = build_qp(pose, (0.3, 0.0), Pose2D(1.0, 0.0, 0.0), one, (0.3, 0.0), 0.05, CFG)
     b = build_qp(pose, (0.3, 0.0), Pose2D(1.0, 0.0, 0.0), two, (0.3, 0.0), 0.05, CFG)
-    assert (a.tight, a.alpha) == (False, 0.21)
-    assert (b.tight, b.alpha) == (True, 0.46)
+    assert (a.tight, a.alpha) == (False, CFG.alpha)
+    assert (b.tight, b.alpha) == (True, CFG.alpha_tight)
     assert b.b[0] == pytest.approx(-CFG.lam_tight * b.V)
 
 

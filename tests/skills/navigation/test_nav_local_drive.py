@@ -245,6 +245,24 @@ def test_an_obstacle_the_map_lacks_is_seen_and_passed_by_a_replan(events):
     assert closest[0] > 0.0 and robot.base.contacts == 0
 
 
+def test_a_goal_an_unmapped_box_stands_on_moves_out_of_the_filter_zone(events):
+    """A crate the map lacks stands 0.15 m from the goal (a search viewpoint, say): the
+    base could never get there (the filter guards the crate's zone), so the drive moves
+    the goal to the nearest point outside the zone, within nav's zone_goal_search of the
+    goal asked for, says so, and arrives there without touching the crate."""
+    crate = (4.0, 1.5, 0.2)
+    robot = _robot(room(), Pose2D(1.0, 1.5, 0.0), circles=[crate])
+    ctx = _ctx(robot, events)
+    run = _drive(robot, ctx, x=4.0, y=1.65)
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    moved = _of(events, "nav_goal_moved")
+    assert moved and moved[0]["goal"] == [4.0, 1.65] and 0.0 < moved[-1]["by"] <= 0.6
+    end = robot.base.pose
+    assert end.distance_to(Pose2D(*moved[-1]["to"])) <= 0.05
+    assert end.distance_to(Pose2D(4.0, 1.65)) <= 0.6
+    assert math.hypot(end.x - crate[0], end.y - crate[1]) > crate[2] + 0.178 and robot.base.contacts == 0
+
+
 def test_a_way_closed_for_good_is_a_planning_failure_after_the_recoveries(events):
     """A row of crates closes the room: re-plans find no way, the stuck recoveries (turn,
     back off, re-plan) are spent, and the drive fails with PLANNING, saying why."""

@@ -31,7 +31,7 @@ def _room() -> OccupancyGrid:
 
 
 def test_dwa_and_cbf_reach_the_goal_keeping_every_barrier():
-    cfg = LocalPlannerConfig.for_base(LOCOBOT_KOBUKI, MARGIN)   # the paper's alpha 0.21 / 0.46
+    cfg = LocalPlannerConfig.for_base(LOCOBOT_KOBUKI, MARGIN)   # alpha 1.0 / 2.0 (the defaults)
     rec = run_closed_loop(_room(), START, GOAL, POLES, POLE_RADII, WALKER, cfg, t_max=120.0)
     assert rec.reached, rec
     # h = |p - c|^2 - (r + robot radius + margin)^2 >= 0 at every step, for every pole and
