@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
+import os
 import platform
 import statistics
 import time
@@ -225,6 +226,9 @@ class Outcome:
     arm_ms: float = 0.0
     drive: float = 0.0
     dense: bool | None = None  # a failure re-run with the dense search: solved?
+    cpu_ms: float = 0.0
+    attempts: int = 0
+    tolerant: bool = True
 
 
 #: The dense search a failure is re-run with: 10 x the goal candidates, no navigation
@@ -246,17 +250,18 @@ def run_robot(robot: Robot, queries: int, seed: int, algorithm: str, time_limit:
         for i, q in enumerate(qs):
             model.use_map(q.costmap)
             model.prepare(q.world.scene_boxes())
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             r = planner.plan(q.start, robot.stow, q.pre_grasp, T_map_grasp=q.grasp, seeds=robot.seeds)
-            ms = (time.perf_counter() - t) * 1e3
-            o = Outcome(r.success, ms, r.reason)
+            ms, cpu = (time.perf_counter() - t) * 1e3, (time.process_time() - c) * 1e3
+            o = Outcome(r.success, ms, r.reason, cpu_ms=cpu, attempts=r.attempts, tolerant=r.tolerant)
             if r.success:
                 assert r.base_pose is not None and r.arm is not None
                 state = (r.base_pose.x, r.base_pose.y, r.base_pose.theta, *r.arm)
                 err = float(np.linalg.norm(model.tool_pose(state)[:3, 3] - q.pre_grasp[:3, 3]))
                 path = plan_path(q.costmap, (q.start.x, q.start.y), (r.base_pose.x, r.base_pose.y))
                 if err > 1e-3 or not model.is_valid(state) or path is None:
-                    o = Outcome(False, ms, f"bad solution: fk error {err * 1e3:.1f} mm, A* path {path is not None}")
+                    o = Outcome(False, ms, f"bad solution: fk error {err * 1e3:.1f} mm, A* path {path is not None}",
+                                cpu_ms=cpu)
                 else:
                     o.drive = float(sum(math.dist(a, b) for a, b in itertools.pairwise(path)))
                     # the base stops near, not at, the planned pose: re-plan the arm from there
@@ -280,6 +285,7 @@ def run_robot(robot: Robot, queries: int, seed: int, algorithm: str, time_limit:
             if verbose:
                 dense = "" if o.dense is None else f" [dense search: {'solved' if o.dense else 'none'}]"
                 print(f"{robot.name} {algorithm} query {i:2d} {q.kind:5s}: {'ok ' if o.ok else 'FAIL'} {o.ms:7.1f} ms "
+                      f"(CPU {o.cpu_ms:6.1f}) "
                       f"drive {o.drive:4.2f} m; arm {'ok ' if o.arm_ok else '-- '} {o.arm_ms:6.1f} ms {o.reason}{dense}")
     finally:
         model.close()
@@ -290,8 +296,11 @@ def _summary(name: str, res: list[Outcome]) -> str:
     ok = [o for o in res if o.ok]
     ms = [o.ms for o in res]
     arm = [o.arm_ms for o in ok if o.arm_ok]
+    cpu = [o.cpu_ms for o in res]
     line = (f"{name}: solved {len(ok)}/{len(res)} ({100.0 * len(ok) / len(res):.0f} %), planning ms median "
-            f"{statistics.median(ms):.0f}, p90 {sorted(ms)[max(0, int(0.9 * len(ms)) - 1)]:.0f}, max {max(ms):.0f}")
+            f"{statistics.median(ms):.0f}, p90 {sorted(ms)[max(0, int(0.9 * len(ms)) - 1)]:.0f}, max {max(ms):.0f} "
+            f"(CPU median {statistics.median(cpu):.0f}); first attempt {sum(o.attempts == 1 for o in ok)}, "
+            f"without the navigation tolerance {sum(not o.tolerant for o in ok)}")
     if ok:
         line += f"; drive median {statistics.median(o.drive for o in ok):.2f} m"
     if arm:
@@ -315,7 +324,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rrtstar", type=int, default=0, metavar="N", help="also RRT* on the first N queries")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args(argv)
-    print(f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}")
+    print(f"machine: {platform.machine()} {platform.processor() or ''} python {platform.python_version()}, "
+          f"load average at start {os.getloadavg()[0]:.1f}")
     all_ms: list[float] = []
     for name in args.robots.split(","):
         robot = robot_profile(name)
@@ -329,6 +339,7 @@ def main(argv: list[str] | None = None) -> int:
             star = run_robot(robot, args.queries, args.seed, "rrtstar", args.time_limit, args.attempts, args.rrtstar,
                              args.verbose, recheck=False)
             print(_summary(f"{name} holistic RRT* (first solution) {args.time_limit:g} s x {args.attempts}", star))
+    print(f"load average at the end {os.getloadavg()[0]:.1f}")
     print(f"holistic_plan_median_ms: {statistics.median(all_ms):.1f}")
     return 0
 

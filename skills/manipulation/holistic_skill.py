@@ -129,10 +129,12 @@ def grasp_frame(point: Sequence[float], kind: str, yaw: float) -> np.ndarray:
 
 def _frame_from_world(ctx: SkillContext, key: str, kind: str) -> np.ndarray:
     """A 4x4 grasp frame from world-model entry ``key``: a 4x4 (array or nested list),
-    or an object with ``T_map_top`` / ``T_map_front`` (a perception grasp point)."""
+    an object with ``T_map_top`` / ``T_map_front`` (a perception grasp point), or one
+    holding such a grasp point as ``grasp`` (the fetch_object mission's target)."""
     if key not in ctx.world:
         raise SkillFailure(FailureKind.PRECONDITION, f"holistic_standoff: no world-model entry {key!r}")
     value = ctx.world[key]
+    value = getattr(value, "grasp", value)  # a fetch target holding its grasp point
     value = getattr(value, f"T_map_{kind}", value)
     try:
         T = np.asarray(value, dtype=float)
@@ -191,8 +193,8 @@ def _emit_plan(ctx: SkillContext, res: HolisticResult, round_: int) -> None:
             "top: heading of the fingers' travel in map (default 0); front: heading of the side the gripper "
             "comes from (default: from the point towards the robot)")),
         Param("frame", str, doc=(
-            "world-model key of the grasp frame instead of point/yaw: a 4x4 in map, or an object with "
-            "T_map_top / T_map_front (a perception grasp point)")),
+            "world-model key of the grasp frame instead of point/yaw: a 4x4 in map, an object with "
+            "T_map_top / T_map_front (a perception grasp point) or holding one as 'grasp' (fetch_object.target)")),
         Param("size", list, unit="m", doc="the object's box [x, y, z] (axes of the grasp frame), kept clear of"),
         Param("move_arm", bool, default=True, doc="move the arm to the pre-grasp at the end"),
         Param("timeout", float, unit="s", doc="navigation timeout (default: profile nav.timeout)"),

@@ -279,3 +279,28 @@ def test_holistic_standoff_in_the_sim(tmp_path):
     T_pre = grasp_poses(grasp_frame(point, "front", yaw), 0, pre_grasp=(0.0, 0.0, 0.10)).pre_grasp
     T = base.matrix() @ seen["mount"] @ wx250s().fk(seen["q"])
     assert np.linalg.norm(T[:3, 3] - T_pre[:3, 3]) < 0.02  # the true tool at the pre-grasp
+
+
+def test_grasp_frames_and_world_targets(skill_ctx):
+    """The skill's grasp frames (top: z up, fingers' travel at yaw; front: z at yaw, y up)
+    and a grasp frame read from the world model, directly or inside a target."""
+    from types import SimpleNamespace
+
+    from mmexec.skills.base import SkillFailure
+    from mmexec.skills.manipulation.holistic_skill import _frame_from_world, grasp_frame
+
+    top = grasp_frame([1.0, 2.0, 0.5], "top", math.pi / 2)
+    assert np.allclose(top[:3, 2], [0, 0, 1]) and np.allclose(top[:3, 0], [0, 1, 0]) and np.allclose(top[:3, 3], [1, 2, 0.5])
+    front = grasp_frame([1.0, 2.0, 0.5], "front", math.pi)
+    assert np.allclose(front[:3, 2], [-1, 0, 0]) and np.allclose(front[:3, 1], [0, 0, 1])
+    for T in (top, front):
+        assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) and np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
+    skill_ctx.world["t"] = SimpleNamespace(grasp=SimpleNamespace(T_map_top=top, T_map_front=front))
+    assert np.allclose(_frame_from_world(skill_ctx, "t", "front"), front)
+    skill_ctx.world["m"] = top.tolist()
+    assert np.allclose(_frame_from_world(skill_ctx, "m", "top"), top)
+    skill_ctx.world["bad"] = "shelf"
+    with pytest.raises(SkillFailure, match="holds no 4x4 grasp frame"):
+        _frame_from_world(skill_ctx, "bad", "top")
+    with pytest.raises(SkillFailure, match="no world-model entry 'nope'"):
+        _frame_from_world(skill_ctx, "nope", "top")
