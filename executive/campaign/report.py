@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from mmexec.executive.campaign.fruittruth import fruit_report_lines, summarize_fruit
+from mmexec.executive.campaign.navtruth import nav_report_lines, summarize_nav
 from mmexec.executive.campaign.trial import TrialResult
 
 __all__ = ["Z95", "summarize", "wilson_interval", "write_outputs"]
@@ -102,6 +103,9 @@ def summarize(results: Sequence[TrialResult], identity: Mapping[str, Any] | None
     panels = _panel_truth(results)
     if panels:
         out["panel_truth"] = panels
+    nav = summarize_nav([r.truth for r in results])
+    if nav:
+        out["nav_truth"] = nav
     if identity is not None:
         out["campaign"] = {k: v for k, v in identity.items() if k != "faults_patches"}
     return out
@@ -257,6 +261,7 @@ def _report(identity: Mapping[str, Any], summary: Mapping[str, Any], results: Se
                   f"| trials with every light on and every press within 5 mm | {pt['trials_all_on_and_within']}/{pt['trials']} |",
                   (f"| press offset from the centre, median / p95 / max | {_fmt(o['median'], ' mm')} / "
                   f"{_fmt(o['p95'], ' mm')} / {_fmt(o['max'], ' mm')} |"), ""]
+    lines += nav_report_lines(summary.get("nav_truth", {}))
     if summary["failure_reasons"]:
         lines += ["## Failure reasons", "", "| trials | reason |", "|---:|---|"]
         lines += [f"| {n} | {reason.replace('|', '/')} |" for reason, n in summary["failure_reasons"].items()]

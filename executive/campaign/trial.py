@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mmexec.executive.campaign.navtruth import log_measures, truth_measures
+
 __all__ = ["TrialResult", "TrialSpec", "parse_trial_log", "read_truth"]
 
 #: [mm] a press counts as on the button within this distance of its centre
@@ -112,9 +114,10 @@ def read_truth(spec: TrialSpec) -> dict[str, Any]:
                 lights.update(rec.get("lights", {}))
     except (OSError, ValueError):
         return {"truth_error": f"unreadable ground truth {path}"}
+    nav = truth_measures(path)  # contacts, gaps to people, clearance (navtruth.py)
     if not presses and not lights:
-        return {}
-    return {"panel_presses": presses, "panel_lights": len(lights), "panel_lights_on": sum(map(bool, lights.values())),
+        return nav
+    return {**nav, "panel_presses": presses, "panel_lights": len(lights), "panel_lights_on": sum(map(bool, lights.values())),
             "presses_within": sum(1 for p in presses if p is not None and p <= PRESS_TOLERANCE_MM)}
 
 
@@ -140,7 +143,7 @@ def parse_trial_log(spec: TrialSpec, *, exit_code: int | None, wall: float, note
     recoveries = sum(r["recoveries"] for r in rows)
     common = {"index": spec.index, "seed": spec.seed, "clock": clock, "wall": wall, "recoveries": recoveries,
               "exit_code": exit_code, "requests": rows, "command": spec.command, "log": spec.log_path,
-              "host": os.uname().nodename, "truth": read_truth(spec)}
+              "host": os.uname().nodename, "truth": {**read_truth(spec), **log_measures(records)}}
     if run_end is not None and run_end.get("outcome") == "interrupted":
         return TrialResult(outcome="interrupted", reason="interrupted (Ctrl-C)", **common)
     crashed = run_end is None or run_end.get("outcome") == "error" or exit_code not in (0, 1)
