@@ -424,30 +424,41 @@ class HolisticPlanner:
             chunk = np.arange(c0, min(k, c0 + GOAL_CHUNK))
             for Q0 in starts:
                 todo = chunk[~solved[chunk]]
-                if todo.size == 0 or self.stop.is_set():
+                if todo.size == 0 or self.stop.is_set() or len(goals) >= cfg.goal_count:
                     break
                 qs, ok = batch_ik(kin, T_pre[todo], Q0[todo], free_approach_rotation=free_rotation, max_iterations=80)
                 q[todo[ok]] = qs[ok]
                 solved[todo[ok]] = True
-            for i in chunk[solved[chunk]]:
-                if self.stop.is_set() or len(goals) >= cfg.goal_count:
-                    break
-                bx, by, byaw = (float(v) for v in poses[i])
-                if not m.arm_valid(bx, by, byaw, q[i]) or not m.scene.is_valid(stow):
-                    continue
-                if T_map_grasp is not None:
-                    T_am = np.eye(4)
-                    T_am[:3, :3], T_am[:3, 3] = Rt[i], -Rt[i] @ t_ab[i]
-                    qg = kin.ik(T_am @ T_map_grasp, q[i], free_approach_rotation=free_rotation, attempts=1,
-                                max_iterations=80)
-                    if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
-                        continue
-                if not self._tolerant(bx, by, byaw, q[i], T_map_pre, free_rotation, cfg):
-                    continue
-                goals.append((bx, by, byaw, *(float(v) for v in q[i])))
+                goals += self._accept(todo[ok], poses, q, Rt, t_ab, T_map_pre, T_map_grasp, stow, free_rotation, cfg,
+                                      cfg.goal_count - len(goals))
             if self.stop.is_set() or len(goals) >= cfg.goal_count:
                 break
         return goals, int(solved.sum())
+
+    def _accept(self, rows: np.ndarray, poses: np.ndarray, q: np.ndarray, Rt: np.ndarray, t_ab: np.ndarray,
+                T_map_pre: np.ndarray, T_map_grasp: np.ndarray | None, stow: np.ndarray, free_rotation: bool,
+                cfg: HolisticConfig, wanted: int) -> list[tuple[float, ...]]:
+        """The goal states among the solved candidate ``rows``, in order, at most ``wanted``."""
+        m = self.model
+        kin = m.kin
+        goals: list[tuple[float, ...]] = []
+        for i in rows:
+            if self.stop.is_set() or len(goals) >= wanted:
+                break
+            bx, by, byaw = (float(v) for v in poses[i])
+            if not m.arm_valid(bx, by, byaw, q[i]) or not m.scene.is_valid(stow):
+                continue
+            if T_map_grasp is not None:
+                T_am = np.eye(4)
+                T_am[:3, :3], T_am[:3, 3] = Rt[i], -Rt[i] @ t_ab[i]
+                qg = kin.ik(T_am @ T_map_grasp, q[i], free_approach_rotation=free_rotation, attempts=1,
+                            max_iterations=80)
+                if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
+                    continue
+            if not self._tolerant(bx, by, byaw, q[i], T_map_pre, free_rotation, cfg):
+                continue
+            goals.append((bx, by, byaw, *(float(v) for v in q[i])))
+        return goals
 
     def _tolerant(self, x: float, y: float, yaw: float, q: np.ndarray, T_map_pre: np.ndarray, free_rotation: bool,
                   cfg: HolisticConfig) -> bool:
