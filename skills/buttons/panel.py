@@ -53,6 +53,7 @@ from mmexec.skills.manipulation.arm import (
     arm_settings,
     ik_seeds,
     measured_joints,
+    move_named,
     off_tick,
     planned,
     with_arm_status,
@@ -220,7 +221,7 @@ def find_panel(ctx: SkillContext, marker: int | None = None, locations: list[Any
     for stop in stops:
         if stop is not None:
             pose, label = stop
-            yield from _move_joints(ctx, ws, arm_joints(ctx.profile, arm_settings(ctx).stow), "park the arm")
+            yield from move_named(ctx, arm_settings(ctx).stow)  # park the arm: the lidar sees past it
             try:
                 yield from drive_path(ctx, pose, str(label), timeout=max(1.0, deadline - ctx.clock.now()))
             except SkillFailure as e:
@@ -349,6 +350,24 @@ def _nearest_turns(q: np.ndarray, near: Sequence[float], limits: Sequence[Any]) 
     return out
 
 
+def _head_at(ctx: SkillContext, point_map: np.ndarray) -> Generator[None, None, None]:
+    """Point a head's camera at ``point_map`` [m, map] (nothing without a head)."""
+    head = getattr(ctx.robot, "head", None)
+    base = ctx.robot.base
+    if head is None:
+        return
+    T_map_base = base.state().pose.matrix() if base is not None else np.eye(4)
+    p = np.linalg.inv(T_map_base) @ np.append(np.asarray(point_map, dtype=float), 1.0)
+    yield from wait_goal(ctx, head.look_at(tuple(float(v) for v in p[:3])), timeout=10.0)
+
+
+def _head_home(ctx: SkillContext) -> Generator[None, None, None]:
+    """The head back to its home pose (nothing without a head)."""
+    head = getattr(ctx.robot, "head", None)
+    if head is not None:
+        yield from wait_goal(ctx, head.point(*head.home), timeout=10.0)
+
+
 def _plan_pose(ctx: SkillContext, ws: ArmWorkspace, planner: ArmPlanner, T_map_tool: np.ndarray, what: str,
                panel: tuple[np.ndarray, float]) -> Generator[None, None, PlanResult]:
     """Plan to a tool pose in map, the panel (``(T_map_panel, grow)``) in the scene."""
@@ -406,7 +425,9 @@ def _locate(ctx: SkillContext, frames: int | None) -> SkillGen:
     det = detector(ctx)
     yield from wait_goal(ctx, closing, timeout=GRIPPER_TIMEOUT)
     # an arm-mounted camera is pointed at the panel from each view in turn; any other
-    # camera (a head) looks from where it is
+    # camera looks from where it is, a head turned to the panel's centre first
+    if not on_arm:
+        yield from _head_at(ctx, guess[:3, 3])
     for k, view in enumerate(s.views if on_arm else [None]):
         if view is not None:
             T_tool = _view_pose(guess, view) @ np.linalg.inv(T_tool_cam)
@@ -497,7 +518,16 @@ def press_buttons(ctx: SkillContext, buttons: list[Any] | None = None) -> SkillG
     cap (IK per waypoint, no joint jumps), come back along the same line reversed, read
     the light again. A button lit by an earlier attempt of this request is not pressed
     again. POSTCONDITION naming the buttons whose light stayed off."""
-    return (yield from with_arm_status(ctx, _press(ctx, buttons), "press buttons"))
+    head_home = arm_settings(ctx).look is None  # a head turned to the panel goes home after
+    try:
+        out = yield from with_arm_status(ctx, _press(ctx, buttons), "press buttons")
+    except SkillFailure:
+        if head_home:
+            yield from _head_home(ctx)
+        raise
+    if head_home:
+        yield from _head_home(ctx)
+    return out
 
 
 def _press(ctx: SkillContext, buttons: list[Any] | None) -> SkillGen:
@@ -537,7 +567,16 @@ def _press(ctx: SkillContext, buttons: list[Any] | None) -> SkillGen:
         R = _about_axis(kin.approach_axis, roll)
         above, pressed = path.above @ R, path.pressed @ R
         T_am = T_armbase_map(ctx)
-        res = yield from _plan_pose(ctx, ws, planner, above, f"above {name}", (T_mp, 0.0))
+        try:
+            res = yield from _plan_pose(ctx, ws, planner, above, f"above {name}", (T_mp, 0.0))
+        except SkillFailure as e:
+            if e.kind is not FailureKind.PLANNING or arm_settings(ctx).look is None:
+                raise
+            # from a camera view the wrist can be folded where no way leads to the button:
+            # start again from the look pose
+            log.info("%s; from the look pose", e.reason)
+            yield from move_named(ctx, arm_settings(ctx).look)
+            res = yield from _plan_pose(ctx, ws, planner, above, f"above {name}", (T_mp, 0.0))
         yield from _follow(ctx, res, f"above {name}")
         before = yield from _light(ctx, light_c, spec.light_diameter / 2 * 0.7, s.light_contrast)
         lines: dict[str, Any] = {}

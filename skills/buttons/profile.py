@@ -64,7 +64,7 @@ class ButtonsSettings:
     buttons: tuple[ButtonSettings, ...] = setting(_LAB_BUTTONS, doc="the buttons as built")
     body: tuple[float, float, float] = setting((0.4, 0.3, 0.15), unit="m", gt=0,
                                                doc="panel box [width, height, depth], added to the planning scene")
-    standoff: float = setting(0.85, unit="m", gt=0.2, le=3.0,
+    standoff: float = setting(0.9, unit="m", gt=0.2, le=3.0,
                               doc="base centre to the panel face when parked in front of it")
     retry_shift: float = setting(0.05, unit="m", ge=0, le=0.3,
                                  doc="a repositioning parks this much nearer, then farther, than standoff")
@@ -78,7 +78,7 @@ class ButtonsSettings:
     turn_deg: float = setting(120.0, unit="deg", ge=10, le=180,
                               doc="base turn between two sweeps (counter-clockwise)")
     views: tuple[tuple[float, float, float, float], ...] = setting(
-        ((0.0, 0.06, 0.5, 0.0), (0.0, 0.0, 0.5, 90.0), (0.0, 0.0, 0.5, -90.0)), doc=(
+        ((0.0, 0.0, 0.4, 90.0), (0.0, 0.0, 0.4, -90.0), (0.0, 0.06, 0.45, 0.0)), doc=(
             "camera views of the panel [dx, dy (m, the aimed point from the face centre), distance (m, "
             "camera to face), roll (deg)], tried in order until min_markers are seen"))
     min_markers: int = setting(5, ge=3, doc="markers to see before fitting without trying further views")
