@@ -159,12 +159,14 @@ class WX250sHead(Head):
         self._dev._hold_present(PAN_TILT)
         return True
 
-    def _finish(self, reason: str, *, cancelled: bool = False) -> None:
-        """End the running goal (link lost, faults, close): FAILED or CANCELLED."""
+    def _finish(self, reason: str, *, cancelled: bool = False, only: _HeadRun | None = None) -> None:
+        """End the running goal (link lost, faults, close): FAILED or CANCELLED; with
+        ``only``, that run's goal and only while it is still the running one."""
         with self._lock:
-            run, self._run = self._run, None
-        if run is None:
-            return
+            run = self._run
+            if run is None or (only is not None and run is not only):
+                return
+            self._run = None
         if cancelled:
             run.goal.mark_cancelled(reason)
         else:
@@ -178,7 +180,7 @@ class WX250sHead(Head):
             return
         if run.goal.state is GoalState.CANCELLING:
             self._dev._hold_present(PAN_TILT)
-            self._finish("cancelled: head holding", cancelled=True)
+            self._finish("cancelled: head holding", cancelled=True, only=run)
             return
         dev = self._dev
         with dev._lock:
@@ -196,4 +198,4 @@ class WX250sHead(Head):
             self._dev._hold_present(PAN_TILT)
             self._finish(f"head joint {PAN_TILT[k].name} (servo id {PAN_TILT[k].id}) is {errs[k]:.3f} rad short of "
                          f"its target {dev.config.settle_timeout:.2f} s after the move should have ended "
-                         "(blocked?); holding")
+                         "(blocked?); holding", only=run)

@@ -109,8 +109,9 @@ def test_cancel_holds_where_the_head_is(dev: WX250s, fake: FakeDxlBus) -> None:
     goal.cancel()
     wait(goal, 1.0)
     assert goal.state is GoalState.CANCELLED
+    # goal = present, part way (the fake reads the hold from the pty a moment later)
+    assert until(lambda: -1.4 < pulses_to_rad(fake.servo(PAN).goal_log[-1]) < 1.4), fake.servo(PAN).goal_log[-3:]
     held = fake.servo(PAN).goal_log[-1]
-    assert -1.4 < pulses_to_rad(held) < 1.4  # goal = present, part way
     assert until(lambda: abs(fake.register(PAN, "present_position") - held) <= 1)
 
 
@@ -251,3 +252,13 @@ def test_a_camera_pose_without_head_joints_is_a_capability_error(no_leaks: None)
     robot.head = WX250s(cfg("/dev/nope")).head  # never connected: no reading
     with pytest.raises(CapabilityError, match="the head's joints are not known: /dev/nope: no head state yet"):
         rb._head_motion(robot, model)
+
+
+def test_a_head_that_does_not_get_there_fails_and_holds(dev: WX250s, fake: FakeDxlBus) -> None:
+    fake.servo(PAN)._set("profile_velocity", 1)  # the servo crawls (0.229 rev/min): as if held back
+    goal = dev.head.point(1.0, 0.0)
+    wait(goal, 5.0)
+    assert goal.state is GoalState.FAILED
+    assert goal.reason.startswith("head joint pan (servo id 10) is ") and "holding" in goal.reason
+    # the next cycle writes goal = present, where it had got to
+    assert until(lambda: pulses_to_rad(fake.servo(PAN).goal_log[-1]) < 0.5), fake.servo(PAN).goal_log[-3:]
