@@ -754,7 +754,8 @@ def _teleport_head(core: SimCore, pan: float, tilt: float) -> tuple[float, float
 
 class SimHead(Head):
     """The pan/tilt head on the model's ``pan_tilt_joints``: position-controlled motors
-    (force: the joints' effort limit) whose set-points ramp towards the target at the
+    (force: the joints' effort limit, position gain 0.5 as the arm's: a 1 rad move settles
+    in 0.45 s, the servo's profile takes 0.35 s) whose set-points ramp towards the target at the
     joints' velocity limit every substep, as a servo's velocity profile does. Targets
     outside the URDF limits fail at once (nothing moves); the goal succeeds once the
     set-point is at the target and both measured joints are within :attr:`tolerance`
@@ -832,7 +833,8 @@ class SimHead(Head):
     def _command(self, q: np.ndarray) -> None:
         c = self._c
         p.setJointMotorControlArray(c.body, self._idx, p.POSITION_CONTROL, targetPositions=q.tolist(),
-                                    forces=[lim.effort for lim in self._limits], physicsClientId=c.cid)
+                                    forces=[lim.effort for lim in self._limits], positionGains=[0.5, 0.5],
+                                    physicsClientId=c.cid)
 
     def _on_cancel(self, goal: Goal) -> None:
         q, _ = self._q()
