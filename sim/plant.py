@@ -61,6 +61,9 @@ __all__ = [
 BREAK_DISTANCE = 0.01
 #: [m] stem length between the fruit's top and the branch
 STEM = 0.012
+#: [m] a fruit whose centre lies over a basket's floor and at most this far above its rim
+#: rests in it (on the others)
+IN_BASKET = 0.05
 
 
 @dataclass(frozen=True)
@@ -283,8 +286,8 @@ class RobotBasket:
     """The basket on the robot (``sim.basket``): its floor's centre ``xyz`` [m] in the
     base frame (``base_footprint``), ``size`` [x, y, rim height] [m], wall ``thickness``."""
 
-    xyz: tuple[float, float, float] = (-0.21, 0.0, 0.40)
-    size: tuple[float, float, float] = (0.18, 0.36, 0.12)
+    xyz: tuple[float, float, float] = (-0.205, 0.0, 0.40)
+    size: tuple[float, float, float] = (0.20, 0.46, 0.12)
     thickness: float = 0.008
 
     def validate(self) -> list[str]:
@@ -413,7 +416,7 @@ class PlantSim:
         import pybullet as p
 
         pos = np.array(p.getBasePositionAndOrientation(body, physicsClientId=self._cid)[0])
-        return _box_contains(T_basket if T_basket is not None else self._basket_T(), self.basket.size, pos, 0.02)
+        return _box_contains(T_basket if T_basket is not None else self._basket_T(), self.basket.size, pos, IN_BASKET)
 
     # ------------------------------------------------------------------ magnets and truth
 
@@ -439,7 +442,7 @@ class PlantSim:
             c, s = math.cos(d.pose[2]), math.sin(d.pose[2])
             T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
             T[:3, 3] = (d.pose[0], d.pose[1], 0.0)
-            if _box_contains(T, d.size, pos, 0.02):
+            if _box_contains(T, d.size, pos, IN_BASKET):
                 return f"depot:{d.name}"
         return "floor" if pos[2] < self.fruit[name].radius + 0.02 else "loose"
 

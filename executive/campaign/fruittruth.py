@@ -5,9 +5,9 @@ Two sources per trial, as for navigation (:mod:`.navtruth` when present):
 * the ground-truth sidecar ``DIR/truth/SEED.jsonl`` (:mod:`mmexec.sim.truth`; a sim
   campaign writes one per trial): ``fruit_start`` lists every fruit on the plants, and a
   ``fruit`` record marks each change of a fruit's true state (``plant``, ``held``,
-  ``robot_basket``, ``depot:NAME``, ``floor``, ``loose``). A fruit is **picked** when it
-  has left the plant, **in a basket** when its last state is ``robot_basket`` or a
-  depot. Every fruit on the plant counts as reachable: the world hangs them only on the
+  ``robot_basket``, ``depot:NAME``, ``floor``, ``loose``). A fruit is **picked** when the
+  gripper held it (state ``held``), **knocked off** when it left the plant otherwise,
+  **in a basket** when it was picked and its last state is ``robot_basket`` or a depot's. Every fruit on the plant counts as reachable: the world hangs them only on the
   plant's side the robot works from, at 0.4-1.2 m (docs/fruit.md);
 * the trial's event log: each ``fruit_detections`` record (skills/fruit/pick.py) lists
   the detections of one look with their confidence ``c`` and distance ``z``, and the
@@ -49,13 +49,15 @@ def truth_fruit(path: Path) -> dict[str, Any] | None:
             if line.startswith('{"event":"fruit_start"'):
                 seen = True
                 for fr in json.loads(line).get("fruit", ()):
-                    fruit[fr["name"]] = {"label": fr["label"], "centre": fr["centre"], "final": "plant", "off_t": None}
+                    fruit[fr["name"]] = {"label": fr["label"], "centre": fr["centre"], "final": "plant", "off_t": None,
+                                         "held": False}
             elif line.startswith('{"event":"fruit",'):
                 rec = json.loads(line)
                 fr = fruit.get(rec["name"])
                 if fr is None:
                     continue
                 fr["final"] = rec["state"]
+                fr["held"] = fr.get("held", False) or rec["state"] == "held"
                 if fr["off_t"] is None and rec["state"] != "plant":
                     fr["off_t"] = float(rec["t"])
     return {"fruit": fruit} if seen else None
@@ -111,16 +113,17 @@ def summarize_fruit(out_dir: Path, results: Sequence[Any]) -> dict[str, Any] | N
             continue
         fr = truth["fruit"].values()
         n = len(fr)
-        picked = sum(f["off_t"] is not None for f in fr)
-        basket = sum(f["off_t"] is not None and (f["final"] in BASKET_STATES or f["final"].startswith("depot:"))
-                     for f in fr)
+        picked = sum(f["held"] for f in fr)
+        knocked = sum(f["off_t"] is not None and not f["held"] for f in fr)
+        basket = sum(f["held"] and (f["final"] in BASKET_STATES or f["final"].startswith("depot:")) for f in fr)
         log = Path(r.log)
         ch = choice_measures(log, truth) if log.is_file() else {"choices": 0, "highest": 0, "checked": 0, "matched": 0}
-        trials.append({"trial": r.index, "seed": r.seed, "fruit": n, "picked": picked, "in_basket": basket, **ch})
+        trials.append({"trial": r.index, "seed": r.seed, "fruit": n, "picked": picked, "knocked_off": knocked,
+                       "in_basket": basket, **ch})
     if not trials:
         return None
-    tot = {k: sum(t[k] for t in trials) for k in ("fruit", "picked", "in_basket", "choices", "highest", "checked",
-                                                   "matched")}
+    tot = {k: sum(t[k] for t in trials) for k in ("fruit", "picked", "knocked_off", "in_basket", "choices", "highest",
+                                                   "checked", "matched")}
     per_trial = [t["picked"] / t["fruit"] for t in trials]
     return {
         "trials": len(trials),
@@ -140,6 +143,7 @@ def fruit_report_lines(fruit: dict[str, Any]) -> list[str]:
         return "n/a" if x is None else f"{100 * x:.1f} %"
 
     worst = [t for t in fruit["per_trial"] if t["picked"] < t["fruit"] or t["in_basket"] < t["picked"]]
+    head = "| trial | seed | fruit | picked | knocked off | in basket |"
     lines = [
         "",
         "## Fruit (ground truth + event log)",
@@ -154,6 +158,7 @@ def fruit_report_lines(fruit: dict[str, Any]) -> list[str]:
         f"{fruit['choices']}; the fruit that came off was the chosen one: {fruit['matched']}/{fruit['checked']}"),
     ]
     if worst:
-        lines += ["", "| trial | seed | fruit | picked | in basket |", "|---|---|---|---|---|"]
-        lines += [f"| {t['trial']} | {t['seed']} | {t['fruit']} | {t['picked']} | {t['in_basket']} |" for t in worst]
+        lines += ["", head, "|---|---|---|---|---|---|"]
+        lines += [f"| {t['trial']} | {t['seed']} | {t['fruit']} | {t['picked']} | {t['knocked_off']} | {t['in_basket']} |"
+                  for t in worst]
     return lines

@@ -11,7 +11,7 @@
   pre-grasp (back along the approach), open, straight-line approach, close, pull straight
   back (the magnet lets go), lift; the other fruit, the plant's trunk and the basket on
   the robot are planning obstacles.
-* ``drop_fruit``: into the basket on the robot (the ``robot_basket.drop_pose``) or, with
+* ``drop_fruit``: into the basket on the robot (the ``robot_basket.drop_poses`` in turn) or, with
   the base at the marker-tagged basket, above its release point; open; retract.
 * ``fruit_give_up``: after a failed pick: let go of anything held, count the failure
   against that fruit (skipped once it reaches ``fruit.attempts``), back to the first
@@ -85,7 +85,7 @@ WORLD_TARGET = "fruit.target"
 WORLD_FAILURES = "fruit.failures"
 WORLD_PICKED = "fruit.picked"
 WORLD_DETECTOR = "fruit.detector"
-WORLD_OTHERS = "fruit.others"
+WORLD_OTHERS = "fruit.others"  #: every fruit seen and not picked yet: planning obstacles
 WORLD_LAST_COUNT = "fruit.last_count"
 WORLD_LOST = "fruit.lost"
 #: planning-scene names this package adds (cleared before each plan)
@@ -141,6 +141,7 @@ def fruit_setup(ctx: SkillContext, basket: str = "") -> SkillGen:
     ctx.world[WORLD_FAILURES] = []
     ctx.world[WORLD_LAST_COUNT] = None
     ctx.world[WORLD_LOST] = 0
+    ctx.world[WORLD_OTHERS] = []
     ctx.world.pop(WORLD_TARGET, None)
     yield
     return {"basket": mode, "marker": prof.marker_basket.marker, "distance": prof.marker_basket.distance}
@@ -178,7 +179,13 @@ def _choose(ctx: SkillContext, prof: FruitProfile, found: list[FruitEstimate], v
     skipped = _skipped(ctx, prof)
     cands = [e for e in found if all(np.linalg.norm(e.centre - s) >= prof.same_fruit for s in skipped)]
     k = choose_target([e.confidence for e in cands], [e.z for e in cands], prof.max_depth) if cands else None
-    ctx.world[WORLD_OTHERS] = list(cands)
+    known: list[FruitEstimate] = ctx.world.setdefault(WORLD_OTHERS, [])
+    for e in found:  # remember what each look saw: a fruit out of this view is still an obstacle
+        j = next((i for i, o in enumerate(known) if np.linalg.norm(o.centre - e.centre) < prof.same_fruit), None)
+        if j is None:
+            known.append(e)
+        else:
+            known[j] = e
     ctx.emit("fruit_detections", view=view, detections=[e.to_json() for e in cands], chosen=k,
              skipped=len(found) - len(cands), node=ctx.node_path)
     return None if k is None else cands[k]
@@ -380,6 +387,8 @@ def _pick(ctx: SkillContext, time_limit: float | None) -> SkillGen:
         raise SkillFailure(FailureKind.POSTCONDITION, f"the {target.label} was lost while pulling it off ({why})")
     ctx.emit("fruit_picked", label=target.label, centre=[round(float(v), 4) for v in target.centre],
              node=ctx.node_path)
+    ctx.world[WORLD_OTHERS] = [e for e in ctx.world.get(WORLD_OTHERS, [])
+                               if np.linalg.norm(e.centre - target.centre) >= prof.same_fruit]
     return {"theta": float(cands.thetas[i])}
 
 
@@ -421,7 +430,8 @@ def _drop(ctx: SkillContext, basket: str) -> SkillGen:
     setup = _scene_setup(ctx, ws, prof, T_am, [], None)
     if basket == "robot":
         yield from off_tick(ctx, ws, setup)
-        yield from move_named(ctx, prof.robot_basket.drop_pose)
+        poses = prof.robot_basket.drop_poses
+        yield from move_named(ctx, poses[int(ctx.world.get(WORLD_PICKED, 0)) % len(poses)])
     else:
         T_rel = T_am @ _release_pose(ctx, prof)
         q0 = measured_joints(ctx)

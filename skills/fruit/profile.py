@@ -47,9 +47,10 @@ class RobotBasketSettings:
     """The basket on the robot: its box (for planning) and the arm pose that drops into it."""
 
     box: tuple[float, float, float, float, float, float] = setting(
-        (-0.21, 0.0, 0.46, 0.18, 0.36, 0.12), unit="m",
+        (-0.205, 0.0, 0.46, 0.20, 0.46, 0.12), unit="m",
         doc="centre [x, y, z] and size [x, y, z] of the basket in the base frame (a planning obstacle)")
-    drop_pose: str = setting("drop", refers_to="named_poses", doc="named arm pose holding the fruit above it")
+    drop_poses: tuple[str, ...] = setting(("drop",), doc=(
+        "named arm poses holding the fruit above it, used in turn (spread over the basket, the fruit do not pile up)"))
 
 
 @dataclass(frozen=True)

@@ -80,12 +80,12 @@ FRUIT_PROFILE: dict[str, Any] = {
     "named_poses": {
         "tuck": [0.0, -1.9, 2.3, -1.97, -1.5708, 0.0],
         "look": [0.0, -1.9, 2.3, -1.97, -1.5708, 0.0],
-        "drop": [2.726, -2.014, 1.813, -1.37, -1.5708, 0.0],
+        "drop": [2.718, -2.046, 1.959, -1.484, -1.5708, 0.0],
     },
     "arm": {"model": "ur5e_robotiq", "tcp_offset": 0.155, "stow": "tuck", "carry": "tuck", "look": "look",
             "grasp_force": 40.0, "min_held_width": 0.035, "time_limit": 2.0},
     "fruit": {"station": [0.0, 0.0, 0.0], "look_poses": ["look"], "settle": 0.0, "frames": 1,
-              "robot_basket": {"box": [-0.21, 0.0, 0.46, 0.18, 0.36, 0.12], "drop_pose": "drop"}},
+              "robot_basket": {"box": [-0.205, 0.0, 0.46, 0.20, 0.46, 0.12], "drop_poses": ["drop"]}},
 }
 
 
