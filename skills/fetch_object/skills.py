@@ -98,13 +98,15 @@ from mmexec.skills.perception.scan import WORLD_OBJECT_DETECTOR, WORLD_SCAN, Sca
 from mmexec.skills.primitives import brake
 from mmexec.skills.search import search_settings
 
-__all__ = ["WORLD_CATALOGUE", "WORLD_DETECTOR", "WORLD_TARGET", "ObjectTarget", "catalogue", "detector"]
+__all__ = ["WORLD_CATALOGUE", "WORLD_DETECTOR", "WORLD_GRASP_FRAME", "WORLD_TARGET", "ObjectTarget", "catalogue", "detector"]
 
 log = logging.getLogger(__name__)
 
 WORLD_TARGET = "fetch_object.target"
 WORLD_DETECTOR = "fetch_object.detector"
 WORLD_CATALOGUE = "fetch_object.catalogue"
+#: the current target's grasp frame (4x4, map): what pick_object and holistic_standoff plan to
+WORLD_GRASP_FRAME = "fetch_object.grasp_frame"
 #: clock seconds a camera may give no frame before a look fails
 FRAME_TIMEOUT = 2.0
 #: [m] per side: the held object is modelled this much smaller (it rests on its support)
@@ -116,7 +118,9 @@ class ObjectTarget:
     """The requested object as last seen: ``item`` (catalogue entry), ``detection`` (class,
     confidence, box of the best view), ``grasp`` (:class:`GraspPoint` in map, from that
     view), ``frame`` (that view's camera frame), ``centre`` (3,) [m] fused over the
-    predictions, ``distance`` [m] from the camera, ``predictions`` fused."""
+    predictions, ``distance`` [m] from the camera, ``predictions`` fused, ``normal``: the
+    support's outward normal (map x, y) found when the object was first seen (the
+    stand-off and a front grasp come along it)."""
 
     item: CatalogueItem
     detection: Detection
@@ -125,6 +129,7 @@ class ObjectTarget:
     centre: np.ndarray
     distance: float
     predictions: int
+    normal: tuple[float, float] | None = None
 
 
 # --------------------------------------------------------------------------- world model
@@ -269,7 +274,17 @@ def scan_for(ctx: SkillContext, item: CatalogueItem) -> Generator[None, None, Ob
 
 
 def _record(ctx: SkillContext, t: ObjectTarget, where: str) -> None:
+    """Put the target in the world model with its support normal (kept from an earlier
+    sighting of the same request: the support does not change when the robot moves) and
+    its grasp frame (:data:`WORLD_GRASP_FRAME`, the frame the holistic planner plans to)."""
+    old = ctx.world.get(WORLD_TARGET)
+    if isinstance(old, ObjectTarget) and old.item.name == t.item.name and old.normal is not None:
+        t = replace(t, normal=old.normal)
+    else:
+        cam = (t.frame.T_map_base @ t.frame.T_base_camera)[:3, 3]
+        t = replace(t, normal=support_normal(ctx, t.grasp.centre[:2], cam[:2]))
     ctx.world[WORLD_TARGET] = t
+    ctx.world[WORLD_GRASP_FRAME] = _grasp_frame(t, _grasp_mode(fetch_object_settings(ctx), t.item)[0])
     ctx.emit("object_estimate", item=t.item.name, label=t.detection.label, confidence=round(t.detection.confidence, 3),
              box=list(t.detection.box), centre=[round(float(v), 4) for v in t.centre], grasp_pixel=list(t.grasp.pixel),
              yaw=round(t.grasp.yaw, 3), distance=round(t.distance, 3), predictions=t.predictions, where=where,
@@ -283,7 +298,9 @@ def _record(ctx: SkillContext, t: ObjectTarget, where: str) -> None:
         Param("timeout", float, unit="s", default=400.0, doc="give up after this much clock time"),
     ],
     outputs=[Output("centre", list, doc="[x, y, z] of the object's centre of mass in map [m]"),
-             Output("place", str, doc="where it was found (a place name or search_locations[i])")],
+             Output("place", str, doc="where it was found (a place name or search_locations[i])"),
+             Output("grasp", str, doc="the item's grasp: top or front (catalogue, else the profile's)"),
+             Output("size", list, doc="the item's size [m] (catalogue)")],
     needs=("base", "camera"),
 )
 def find_object(ctx: SkillContext, item: str, timeout: float = 400.0) -> SkillGen:
@@ -324,7 +341,8 @@ def find_object(ctx: SkillContext, item: str, timeout: float = 400.0) -> SkillGe
                 _record(ctx, t, stop.name)
                 ctx.emit("object_found", item=it.name, place=stop.name, likely=stop.likely, views=views,
                          node=ctx.node_path)
-                return {"centre": [float(v) for v in t.centre], "place": stop.name}
+                return {"centre": [float(v) for v in t.centre], "place": stop.name,
+                        "grasp": _grasp_mode(prof, it)[0], "size": list(it.size)}
             if ctx.clock.now() > deadline:
                 raise SkillFailure(FailureKind.EXECUTION, f"{it.name} not found within {timeout:g} s ({views} views)")
     unreachable = f" ({len(skipped)} unreachable: {', '.join(skipped)})" if skipped else ""
@@ -336,9 +354,10 @@ def find_object(ctx: SkillContext, item: str, timeout: float = 400.0) -> SkillGe
 
 def support_normal(ctx: SkillContext, xy: np.ndarray, toward: np.ndarray, reach: float = 1.0) -> tuple[float, float]:
     """Unit direction (map x, y) from an object at ``xy`` [m] to the nearest free cell of
-    the robot's map within ``reach`` [m]: out of its support, perpendicular to the
-    support's nearest edge. Ties (and an object on the open floor) go towards ``toward``
-    (the camera it was seen from)."""
+    the robot's map within ``reach`` [m] on the side of ``toward`` (the camera it was seen
+    from: within 45 degrees of that direction, so not past a shelf's side panel): out of
+    its support, perpendicular to the support's nearest edge. Ties (and an object on the
+    open floor) go towards ``toward``."""
     grid = ctx.robot.occupancy
     v = np.asarray(toward, dtype=float)[:2] - xy
     fallback = v / max(float(np.linalg.norm(v)), 1e-9)
@@ -361,6 +380,9 @@ def support_normal(ctx: SkillContext, xy: np.ndarray, toward: np.ndarray, reach:
     py = oy + (ii + i0 + 0.5) * res - xy[1]
     d = np.hypot(px, py)
     dirs = np.stack([px, py], axis=1) / np.maximum(d, 1e-9)[:, None]
+    seen = dirs @ fallback > math.cos(math.pi / 4)  # the side the camera saw it from (not past a side panel)
+    if seen.any():
+        d, dirs = d[seen], dirs[seen]
     k = int(np.argmin(d - 1e-3 * (dirs @ fallback)))  # the nearest free cell (ties: the camera's side)
     # the free cells along that edge (as near as the nearest plus a cell and a half, on its
     # side): their mean direction is perpendicular to the edge (the nearest cell alone is
@@ -402,7 +424,7 @@ def approach_object(ctx: SkillContext, distance_index: int = 0, timeout: float |
     base = ctx.robot.base
     assert base is not None
     cam = (t.frame.T_map_base @ t.frame.T_base_camera)[:3, 3]
-    normal = support_normal(ctx, t.centre[:2], cam[:2])
+    normal = t.normal if t.normal is not None else support_normal(ctx, t.centre[:2], cam[:2])
     T = _pseudo_marker(t.centre, normal)
     dists = gs.standoff[min(max(distance_index, 0), len(gs.standoff) - 1):]
     start = base.state().pose
@@ -479,7 +501,8 @@ def mark_dangerous(ctx: SkillContext, timeout: float | None = None) -> SkillGen:
         moved = move_grasp(t.grasp, t.frame, fix.corrected, t.detection.box)
     except GraspPointError as e:
         raise SkillFailure(FailureKind.EXECUTION, f"{t.item.name}: the corrected grasp pixel has no depth: {e}") from None
-    ctx.world[WORLD_TARGET] = replace(t, grasp=moved, centre=moved.centre)
+    ctx.world[WORLD_TARGET] = moved_t = replace(t, grasp=moved, centre=moved.centre)
+    ctx.world[WORLD_GRASP_FRAME] = _grasp_frame(moved_t, _grasp_mode(fetch_object_settings(ctx), t.item)[0])
     ctx.emit("grasp_corrected", item=t.item.name, predicted=list(fix.predicted), clicked=list(fix.clicked),
              corrected=list(fix.corrected), before=[round(float(c), 4) for c in t.grasp.centre],
              after=[round(float(c), 4) for c in moved.centre], source=answer["source"], node=ctx.node_path)
@@ -490,7 +513,21 @@ def mark_dangerous(ctx: SkillContext, timeout: float | None = None) -> SkillGen:
 
 
 def _grasp_frame(t: ObjectTarget, mode: str) -> np.ndarray:
-    return t.grasp.T_map_top if mode == "top" else t.grasp.T_map_front
+    """The grasp frame in map: the top frame as estimated; the front frame turned about
+    the vertical so the gripper comes in along the support's outward normal (straight
+    into a shelf, not along the view of a camera that saw it at an angle)."""
+    if mode == "top" or t.normal is None:
+        return t.grasp.T_map_top if mode == "top" else t.grasp.T_map_front
+    nx, ny = t.normal
+    T = t.grasp.T_map_front.copy()
+    z = np.array([nx, ny, 0.0])
+    if abs(T[2, 1]) > 0.9:  # y up: the fingers close horizontally
+        y = T[:3, 1]
+        T[:3, 0], T[:3, 1], T[:3, 2] = np.cross(y, z), y, z
+    else:  # x up: the fingers close vertically (a flat item)
+        x = T[:3, 0]
+        T[:3, 0], T[:3, 1], T[:3, 2] = x, np.cross(z, x), z
+    return T
 
 
 @skill(

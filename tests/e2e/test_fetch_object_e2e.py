@@ -133,3 +133,17 @@ def test_no_answer_within_the_timeout_fails_the_request_cleanly_at_home(tmp_path
     stow = [r for r in events(run, "arm_plan") if r["what"] == "arm to tuck"]
     assert stow, "the arm was not stowed on the way home"
     assert not events(run, "object_grasp")
+
+
+def test_a_box_behind_a_crate_is_fetched_from_the_holistic_planners_base_pose(tmp_path: Path) -> None:
+    # lab_objects_blocked: a low crate in front of the far shelf's red box leaves no free
+    # stand-off facing it; the holistic planner (base x, y, yaw + arm) finds where to stand
+    run = run_objects(tmp_path, ["box_red"], edit=("  world: lab_objects\n", "  world: lab_objects_blocked\n"))
+    assert [r.outcome for r in run["results"]] == ["success"], run["out"]
+    truth = run["truth"][0]
+    assert truth["in_depot"]["box_red"] == "depot"
+    failures = [r for r in events(run, "skill_failure") if r["skill"] == "approach_object"]
+    assert failures and "no free stand-off" in failures[0]["reason"]
+    plans = events(run, "holistic_plan")
+    assert plans and plans[-1]["success"]
+    assert [g for g in events(run, "object_grasp") if g["mode"] == "front"]

@@ -20,13 +20,15 @@ def _ctx() -> SkillContext:
     return SkillContext(robot=robot, clock=SimpleNamespace(now=lambda: 0.0))  # type: ignore[arg-type]
 
 
-@pytest.mark.parametrize(("xy", "expect"), [
-    ((2.0, 0.6), (0.0, 1.0)),    # near the north edge: stand north of it
-    ((2.42, 0.3), (1.0, 0.0)),   # near the east edge: stand east of it
-    ((1.55, 0.35), (-1.0, 0.0)), # near the west edge
+@pytest.mark.parametrize(("xy", "camera", "expect"), [
+    ((2.0, 0.6), (2.0, 1.5), (0.0, 1.0)),     # near the north edge, seen from the north: stand north of it
+    ((2.42, 0.3), (3.5, 0.3), (1.0, 0.0)),    # near the east edge, seen from the east
+    ((1.55, 0.35), (0.5, 0.5), (-1.0, 0.0)),  # near the west edge, seen from the west
+    ((2.0, 0.45), (2.0, 1.5), (0.0, 1.0)),    # the south wall is nearer, but the camera saw it from the north
 ])
-def test_the_normal_points_out_of_the_supports_nearest_edge(xy: tuple[float, float], expect: tuple[float, float]) -> None:
-    n = support_normal(_ctx(), np.array(xy), np.array([2.0, 1.5]))
+def test_the_normal_points_out_of_the_supports_nearest_edge_on_the_cameras_side(
+        xy: tuple[float, float], camera: tuple[float, float], expect: tuple[float, float]) -> None:
+    n = support_normal(_ctx(), np.array(xy), np.array(camera))
     assert n == pytest.approx(expect, abs=0.15)
     assert np.hypot(*n) == pytest.approx(1.0)
 
