@@ -20,7 +20,7 @@ Usage (from the repository root)::
 
     .venv/bin/python benchmarks/nav_figure.py --run                 # run the scenario, draw docs/img/nav_run.png
     .venv/bin/python benchmarks/nav_figure.py LOG TRUTH --world W   # draw a logged run
-    .venv/bin/python benchmarks/nav_figure.py --truth-summary DIR/truth   # a campaign's ground truth
+    .venv/bin/python benchmarks/nav_figure.py --truth-summary DIR   # a campaign's navigation measures
 
 ``--run`` fetches item 2 in the ``corridors`` world (config/locobot_corridors_sim.yaml,
 seed 0) with a parcel the map does not show in the strip east of the long desk and the
@@ -44,6 +44,12 @@ from typing import Any
 
 import numpy as np
 
+from mmexec.executive.campaign.navtruth import (
+    log_measures,
+    nav_report_lines,
+    summarize_nav,
+    truth_measures,
+)
 from mmexec.executive.eventlog import read_log
 from mmexec.sim.world import load_world
 
@@ -195,29 +201,35 @@ def draw(events: Path, truth: Path, world: str, out: Path) -> dict[str, float]:
 
 
 def truth_summary(folder: Path) -> str:
-    """A campaign's ground truth (``DIR/truth/*.jsonl``) in numbers: per trial the
-    contacts (and with what), the smallest gap to a person and the smallest clearance to
-    the static geometry; then the totals. Returns the text (markdown table)."""
-    rows, gaps, clears, with_contact, person_contact = [], [], [], 0, 0
-    for path in sorted(folder.glob("*.jsonl")):
-        end = next((r for r in _read_jsonl(path) if r["event"] == "truth_end"), None)
-        if end is None:
-            rows.append(f"| {path.stem} | (no summary: the run did not end) | | |")
+    """A campaign's navigation measures in numbers, from its ground truth
+    (``folder/truth/SEED.jsonl``) and its trials' event logs (``folder/trials``): the
+    per-trial rows (contacts and with what, the smallest true gap to a person, the
+    smallest true clearance, the filter's smallest logged h), then the campaign's
+    "Navigation (ground truth)" table as ``mmexec campaign`` writes it into report.md
+    (:mod:`mmexec.executive.campaign.navtruth`). ``folder`` may also be the truth folder
+    itself (no event logs then). Returns the text (markdown)."""
+    truth_dir = folder / "truth" if (folder / "truth").is_dir() else folder
+    logs = {}
+    for res in sorted((folder / "trials").glob("*.json")) if truth_dir != folder else ():
+        data = json.loads(res.read_text())
+        logs[str(data["seed"])] = Path(data["log"]).with_name(res.stem + ".jsonl")
+    rows, measures = [], []
+    for path in sorted(truth_dir.glob("*.jsonl")):
+        m = truth_measures(path)
+        log_path = logs.get(path.stem)
+        if log_path is not None and log_path.is_file():
+            m.update(log_measures(_read_jsonl(log_path)))
+        measures.append(m)
+        if "truth_ticks" not in m:
+            rows.append(f"| {path.stem} | (no ticks) | | | |")
             continue
-        gap = min((g for g in end["min_gap"].values() if g is not None), default=math.inf)
-        people = set(end["min_gap"])
-        bodies = end["contact_bodies"]
-        with_contact += bool(end["contacts"])
-        person_contact += any(b in people for b in bodies)
-        gaps.append(gap)
-        clears.append(end["min_clearance"])
-        what = ", ".join(f"{b} x{n}" for b, n in sorted(bodies.items())) or "none"
-        rows.append(f"| {path.stem} | {what} | {gap:.3f} | {end['min_clearance']:.3f} |")
-    head = ["| seed | contacts | min gap to a person [m] | min clearance [m] |", "|---|---|---:|---:|"]
-    total = (f"\n{len(gaps)} trials: {with_contact} with a contact, {person_contact} with a person; "
-             f"min gap to a person median {np.median(gaps):.3f} m, smallest {min(gaps):.3f} m; "
-             f"min clearance median {np.median(clears):.3f} m, smallest {min(clears):.3f} m") if gaps else ""
-    return "\n".join(head + rows) + total
+        what = ", ".join(f"{b} x{n}" for b, n in sorted(m["contact_bodies"].items())) or "none"
+        gap = "-" if m["min_gap_person"] is None else f"{m['min_gap_person']:.3f}"
+        h = f"{m['nav_min_h']:.4f}" if "nav_min_h" in m else "-"
+        rows.append(f"| {path.stem} | {what} | {gap} | {m['min_clearance']:.3f} | {h} |")
+    head = ["| seed | contacts | min gap to a person [m] | min clearance [m] | filter's min h [m^2] |",
+            "|---|---|---:|---:|---:|"]
+    return "\n".join(head + rows + [""] + nav_report_lines(summarize_nav(measures)))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -228,7 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--world", help="the run's world (shipped name or file; default: the sidecar's world name)")
     ap.add_argument("--run", action="store_true", help="run the corridors scenario first (module docstring)")
     ap.add_argument("--out", type=Path, default=REPO / "docs" / "img" / "nav_run.png")
-    ap.add_argument("--truth-summary", type=Path, metavar="DIR", help="print a campaign's DIR/truth in numbers")
+    ap.add_argument("--truth-summary", type=Path, metavar="DIR", help="print a campaign's navigation measures")
     args = ap.parse_args(argv)
     if args.truth_summary is not None:
         print(truth_summary(args.truth_summary))

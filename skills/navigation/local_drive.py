@@ -576,7 +576,7 @@ class LocalDrive:
                 yield from brake(ctx, base)
                 return True
             circles = self.planner.circles_at(now)
-            if len(circles):
+            if len(circles) and self.config.planner.use_cbf:
                 f = self.planner.cbf.filter(st.pose, (v, w), None, circles, u, dt, max(v, 0.0))
                 v, w = f.v, f.w
             if tracker.phase != phase:

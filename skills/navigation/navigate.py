@@ -120,6 +120,9 @@ class NavSettings:
         "contacts, before a drive fails"))
     recovery_back_off: float = setting(0.2, unit="m", ge=0, doc=(
         "local planner: how far a recovery or a contact backs off (less where the costmap leaves less room)"))
+    safety_filter: bool = setting(True, doc=(
+        "local planner: pass every command through the CLF-CBF safety filter; false sends the DWA's command "
+        "unfiltered (for comparisons only: what the filter buys)"))
 
     def validate(self) -> list[str]:
         """Checks that relate several settings (single-value ranges are declared)."""
@@ -190,7 +193,8 @@ def local_drive_config(ctx: SkillContext, base: Base, max_v: float | None) -> Lo
     limits = BaseLimits(radius=base.radius, max_v=min(max_v or nav.max_v, base.max_linear),
                         max_w=min(nav.max_w, base.max_angular), accel_v=min(nav.accel_v, base.max_linear_accel),
                         accel_w=min(nav.accel_w, base.max_angular_accel))
-    planner = LocalPlannerConfig.for_base(limits, nav.margin, dwa=DwaConfig(goal_tolerance=nav.goal_tolerance))
+    planner = LocalPlannerConfig.for_base(limits, nav.margin, dwa=DwaConfig(goal_tolerance=nav.goal_tolerance),
+                                          use_cbf=nav.safety_filter)
     return LocalDriveConfig(planner=planner, margin=nav.margin, tracker=_tracker_config(ctx, base, max_v),
                             replan_interval=nav.replan_interval,
                             recoveries=nav.recoveries, back_off=nav.recovery_back_off,

@@ -24,6 +24,7 @@ from mmexec.drivers.interfaces import BaseState, LaserScan, Lidar, OccupancyGrid
 from mmexec.drivers.mock.robot import ManualClock, MockBase, MockRobot
 from mmexec.skills.base import FailureKind, SkillContext, SkillStatus, run_skill
 from mmexec.skills.navigation.local_drive import WORLD_LOCAL_PLANNER, WORLD_PATH, contact_points
+from mmexec.skills.navigation.navigate import local_drive_config
 from mmexec.skills.navigation.synthetic import cast_scan
 
 RES = 0.05
@@ -292,3 +293,11 @@ def test_the_local_planner_needs_a_lidar(events):
     run = _drive(robot, _ctx(robot, events), x=5.0, y=1.5)
     assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.PRECONDITION
     assert "nav.local_planner needs a lidar" in run.failure.reason
+
+
+def test_the_safety_filter_switch_reaches_the_planner(events):
+    """nav.safety_filter (default true) is what the local planner's use_cbf follows; false
+    is for the campaigns that show what the filter buys."""
+    for nav, expected in (({}, True), ({"safety_filter": False}, False)):
+        robot = _robot(room(), Pose2D(1.0, 1.5, 0.0), nav=nav)
+        assert local_drive_config(_ctx(robot, events), robot.base, None).planner.use_cbf is expected
