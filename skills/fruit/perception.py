@@ -17,9 +17,10 @@ the operator's click -> barycentre (DemoV1).
 A detection without enough points or without a fit is kept out (logged with the
 reason). :func:`click_estimate` is DemoV1's pixel: the depth there (median of a small
 window, holes skipped), the surface point on the camera ray, and the barycentre one
-fitted radius further along the ray; when the points round the click fit a sphere whose
-surface holds the clicked point, that fit's centre is taken instead (an off-centre
-click's ray does not pass through the centre).
+fitted radius further along the ray; when the points round the click (of the clicked
+pixel's colour, at a depth near it) fit a sphere whose surface holds the clicked point,
+that fit's centre is taken instead (an off-centre click's ray does not pass through the
+centre).
 
 Frames: points and ``centre_camera`` in the camera optical frame (x right, y down, z
 forward); ``centre`` in ``map`` through the frame's ``T_map_base @ T_base_camera``. m.
@@ -152,6 +153,24 @@ def merge_estimates(views: Sequence[Sequence[FruitEstimate]], same: float) -> li
     return out
 
 
+def _like_clicked(rgb: np.ndarray, pixel: tuple[int, int]) -> np.ndarray:
+    """HxW bool: pixels of the clicked colour (hue within 10 of the median of the 5x5
+    window round ``pixel`` (OpenCV's 0-179 scale), saturation at least half of it); all
+    True when the clicked colour is grey (saturation below 60)."""
+    import cv2
+
+    hsv = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2HSV).astype(np.int16)
+    u, v = pixel
+    h, w = hsv.shape[:2]
+    patch = hsv[max(0, v - 2):min(h, v + 3), max(0, u - 2):min(w, u + 3)].reshape(-1, 3)
+    h0, s0 = int(np.median(patch[:, 0])), int(np.median(patch[:, 1]))
+    if s0 < 60:
+        return np.ones((h, w), dtype=bool)
+    dh = np.abs(hsv[:, :, 0] - h0)
+    dh = np.minimum(dh, 180 - dh)
+    return (dh <= 10) & (hsv[:, :, 1] >= s0 // 2)
+
+
 def click_estimate(frame: CameraFrame, pixel: tuple[float, float], settings: PerceptionSettings,
                    rng: np.random.Generator) -> tuple[np.ndarray, float, str]:
     """DemoV1: the barycentre [m, map] of the fruit under ``pixel`` ``(u, v)``, its radius
@@ -169,7 +188,8 @@ def click_estimate(frame: CameraFrame, pixel: tuple[float, float], settings: Per
     win = np.zeros(depth.shape, dtype=bool)
     win[max(0, v - half):min(h, v + half + 1), max(0, u - half):min(w, u + half + 1)] = True
     near = win & np.isfinite(depth) & (np.abs(depth - d0) < 2.0 * r_max)
-    pts = depth_to_points(depth, intr, mask=near, max_depth=settings.max_depth)
+    same = near & _like_clicked(frame.rgb, (u, v))
+    pts = depth_to_points(depth, intr, mask=same if int(same.sum()) >= 30 else near, max_depth=settings.max_depth)
     fit = _fit(pts, settings, rng) if len(pts) >= 12 else None
     if fit is not None and abs(float(np.linalg.norm(surface - fit.centre)) - fit.radius) < 0.01:
         return _camera_to_map(frame, fit.centre), float(fit.radius), "fit"

@@ -1,7 +1,8 @@
 """End-to-end fruit picking on the UR5e sim (config/ur5e_sim.yaml, the lab's plant):
 trees/pick_fruit.yaml with no request picks every fruit into the basket on the robot
 (ground truth: each fruit's last state); with the plant moved out of the arm's reach the
-mission fails naming why, with nothing held and the arm stowed."""
+mission fails naming why, with nothing held and the arm stowed; trees/fruit/click_pick.yaml
+picks the fruit an operator clicks."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import io
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from simkit import REPO
 
@@ -24,7 +26,8 @@ LAB = REPO / "sim" / "worlds" / "lab.yaml"
 
 
 def run_pick(tmp_path: Path, *, world: str | None = None, params: dict[str, Any] | None = None,
-             seed: int = 0) -> tuple[Any, list[dict[str, Any]], dict[str, Any], str]:
+             seed: int = 0, mission: Path = MISSION,
+             operator: Any = None) -> tuple[Any, list[dict[str, Any]], dict[str, Any], str]:
     """Run the mission once (one empty request); returns (the request's result, the event
     log, the robot's final truth: fruit states, held item, arm joints), the output."""
     text = UR5E_SIM.read_text()
@@ -40,7 +43,7 @@ def run_pick(tmp_path: Path, *, world: str | None = None, params: dict[str, Any]
         holder["robot"] = build_robot(loaded, seed=seed)
         return holder["robot"]
 
-    opts = RunOptions(mission=MISSION, config=cfg, requests=[Request({}, ArgMark("test", 0, 0))],
+    opts = RunOptions(mission=mission, config=cfg, requests=[Request({}, ArgMark("test", 0, 0))],
                       params=dict(params or {}), seed=seed, log_path=log)
     runner = Runner(opts, out=out, err=out, progress=Progress(io.StringIO(), enabled=False), robot_factory=factory)
     truth: dict[str, Any] = {}
@@ -53,6 +56,11 @@ def run_pick(tmp_path: Path, *, world: str | None = None, params: dict[str, Any]
             truth["arm"] = list(r.arm.state().positions)
 
     runner.add_log_listener(on_record)
+    if operator is not None:
+        from mmexec.skills.operator import OPERATOR_KEY
+
+        operator.robot = lambda: holder["robot"]
+        runner.world[OPERATOR_KEY] = operator
     runner.prepare()
     runner.run()
     return runner.results[0], read_log(log), truth, out.getvalue()
@@ -85,3 +93,40 @@ def test_a_plant_out_of_reach_fails_naming_why_with_the_robot_safe(tmp_path: Pat
     assert truth["arm"] == pytest.approx(tuck, abs=0.02)  # stowed before the verdict
     skipped = [r for r in log if r.get("event") == "fruit_skipped"]
     assert len(skipped) == list(truth["fruit"].values()).count("plant")
+
+
+class TruthClicker:
+    """An operator who clicks, on the current camera frame, the pixel where the true
+    centre of fruit ``name`` appears (sim truth stands in for the person)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.robot: Any = None
+        self.pixel: list[float] | None = None
+
+    def ask(self, prompt: Any) -> None:
+        r = self.robot()
+        f = r.camera.frame()
+        T = np.linalg.inv(f.T_map_base @ f.T_base_camera)
+        c = T @ np.append(r.scene_handles.plants.position(self.name), 1.0)
+        uv = (f.intrinsics.matrix() @ c[:3])[:2] / c[2]
+        self.pixel = [float(uv[0]), float(uv[1])]
+
+    def poll(self, prompt_id: str, now: float) -> Any:
+        from mmexec.skills.operator import Answer
+
+        return Answer(self.pixel, "script")
+
+    def close(self, prompt_id: str, reason: str) -> None:
+        pass
+
+
+def test_the_fruit_the_operator_clicks_is_picked(tmp_path: Path) -> None:
+    clicker = TruthClicker("plant_fruit_5")  # the lab's upper green ball, in view from look_high
+    result, log, truth, out = run_pick(tmp_path, mission=REPO / "trees" / "fruit" / "click_pick.yaml",
+                                       operator=clicker)
+    assert result.outcome == "success", out
+    assert truth["fruit"]["plant_fruit_5"] == "robot_basket"
+    assert list(truth["fruit"].values()).count("plant") == len(truth["fruit"]) - 1  # only that one
+    click = [r for r in log if r.get("event") == "fruit_clicked"]
+    assert len(click) == 1 and click[0]["method"] == "fit"
