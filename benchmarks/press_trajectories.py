@@ -115,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     draw(trs, args.out)
     rows: list[dict[str, Any]] = []
-    print("| trajectory | waypoints planned | samples executed | lateral max [mm] | end error along the normal [mm] "
+    print("| trajectory | samples planned | samples executed | lateral max [mm] | end error along the normal [mm] "
           "| planned / executed [s] |")
     print("|---|---:|---:|---:|---:|---|")
     for button, phase, pl, ex in trs:
