@@ -47,6 +47,9 @@ def test_locate_panel_fits_the_seen_markers(ctx, robot):
 
 def test_press_buttons_presses_each_one_left_to_right_along_the_normal(ctx, robot):
     _, panel, _ = _located(ctx, robot)
+    followed = []
+    follow = robot.arm.follow
+    robot.arm.follow = lambda traj: (followed.append(traj), follow(traj))[1]
     run = run_skill(ctx, "press_buttons", panel=panel)
     assert run.status is SkillStatus.SUCCESS, run.failure
     assert run.outputs["outcomes"] == {"b1": "pressed", "b2": "pressed", "b3": "pressed"}
@@ -54,6 +57,11 @@ def test_press_buttons_presses_each_one_left_to_right_along_the_normal(ctx, robo
     assert panel.lit == {"b1", "b2", "b3"}
     for name, depth in panel.depth.items():  # travel 6 mm + overtravel 3 mm, on the estimated cap
         assert 0.006 < depth < 0.013, (name, depth)
+    # above, press, release per button: the straight lines have no joint jump
+    assert len(followed) == 9
+    for traj in followed[1::3] + followed[2::3]:
+        q = np.array(traj.positions)
+        assert np.abs(np.diff(q, axis=0)).max() < 0.15
     presses = events_of(ctx, "button_press")
     assert [e["button"] for e in presses] == ["b1", "b2", "b3"]
     assert all(e["light_before"] is False and e["light_after"] is True for e in presses)
