@@ -455,16 +455,16 @@ class HolisticPlanner:
                             max_iterations=80)
                 if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
                     continue
-            if not self._tolerant(bx, by, byaw, q[i], T_map_pre, free_rotation, cfg):
+            if not self._tolerant(bx, by, byaw, q[i], stow, T_map_pre, free_rotation, cfg):
                 continue
             goals.append((bx, by, byaw, *(float(v) for v in q[i])))
         return goals
 
-    def _tolerant(self, x: float, y: float, yaw: float, q: np.ndarray, T_map_pre: np.ndarray, free_rotation: bool,
-                  cfg: HolisticConfig) -> bool:
-        """The pre-grasp has a collision-free IK (seeded by ``q``) from the base pose
-        shifted by ``cfg.tolerance`` four ways: (+d, 0, +a), (-d, 0, -a), (0, +d, -a),
-        (0, -d, +a) in the base's own axes."""
+    def _tolerant(self, x: float, y: float, yaw: float, q: np.ndarray, stow: np.ndarray, T_map_pre: np.ndarray,
+                  free_rotation: bool, cfg: HolisticConfig) -> bool:
+        """With the base pose shifted by ``cfg.tolerance`` four ways ((+d, 0, +a), (-d, 0,
+        -a), (0, +d, -a), (0, -d, +a) in the base's own axes), the stowed arm is free and
+        the pre-grasp has a collision-free IK (seeded by ``q``)."""
         d, a = cfg.tolerance
         if d == 0 and a == 0:
             return True
@@ -473,8 +473,10 @@ class HolisticPlanner:
         for fx, fy, fa in ((d, 0.0, a), (-d, 0.0, -a), (0.0, d, -a), (0.0, -d, a)):
             px, py, pyaw = x + c * fx - s * fy, y + s * fx + c * fy, yaw + fa
             T = np.linalg.inv(m.T_map_armbase(px, py, pyaw)) @ T_map_pre
+            if not m.arm_valid(px, py, pyaw, stow):
+                return False
             qs = m.kin.ik(T, q, free_approach_rotation=free_rotation, attempts=1, max_iterations=60)
-            if qs is None or not m.arm_valid(px, py, pyaw, qs):
+            if qs is None or not m.scene.is_valid(qs):
                 return False
         return True
 
