@@ -194,7 +194,7 @@ def _search_stops(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str]
         if stop is not None:
             pose, label = stop
             try:
-                yield from drive_path(ctx, pose, label, timeout=max(1.0, deadline - ctx.clock.now()))
+                yield from drive_path(ctx, pose, label, timeout=max(1.0, deadline - ctx.clock.now()), viewpoint=True)
             except SkillFailure as e:
                 if e.kind is not FailureKind.PLANNING:
                     raise

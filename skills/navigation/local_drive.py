@@ -122,8 +122,8 @@ class LocalDriveConfig:
     ``back_off`` [m] how far a recovery backs off; ``heading_tolerance`` [rad] at the
     goal; ``goal_search`` [m] how far a goal an obstacle covers may move (0: fail);
     ``zone_goal_search`` [m] how far a goal inside the zone the filter guards round an
-    obstacle the map does not show may move (a box standing on a search viewpoint: the
-    base could never get there; 0: fail); ``tracker`` the docking tracker's limits and tolerances, ``dock_distance`` [m] how
+    obstacle the map does not show may move (0, the default: never; a search viewpoint a
+    box stands on may move, a pick's stand-off or the depot stop may not); ``tracker`` the docking tracker's limits and tolerances, ``dock_distance`` [m] how
     close to the goal docking starts."""
 
     planner: LocalPlannerConfig
@@ -134,7 +134,7 @@ class LocalDriveConfig:
     back_off: float = 0.2
     heading_tolerance: float = 0.04
     goal_search: float = 0.3
-    zone_goal_search: float = 0.6
+    zone_goal_search: float = 0.0
     dock_distance: float = 0.5
 
 

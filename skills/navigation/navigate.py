@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Generator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from mmexec.config.yamlload import Mark, Problems, mark_of
@@ -202,7 +202,7 @@ def local_drive_config(ctx: SkillContext, base: Base, max_v: float | None) -> Lo
 
 
 def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, max_v: float | None = None,
-               path: list[tuple[float, float]] | None = None) -> Generator[None, None, Pose2D]:
+               path: list[tuple[float, float]] | None = None, viewpoint: bool = False) -> Generator[None, None, Pose2D]:
     """Plan (A*, unless ``path`` is given) from the base's pose to ``goal`` and track the
     path, ending at ``goal.theta``; with ``nav.local_planner`` follow it with the local
     planner (:class:`~mmexec.skills.navigation.local_drive.LocalDrive`). Emits base states
@@ -214,7 +214,9 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
     jumps on the way (the localiser found the robot elsewhere, e.g. after a kidnap), the
     plain drive brakes and plans again from the new pose (``nav_replan``, at most
     :data:`MAX_JUMP_REPLANS` times). Cancellation brakes the base before re-raising.
-    Returns the pose reached."""
+    ``viewpoint``: the goal is a place to look from, which the local planner may move out
+    of an unmapped obstacle's zone (LocalDriveConfig.zone_goal_search). Returns the pose
+    reached."""
     base = ctx.robot.base
     if base is None:
         raise SkillFailure(FailureKind.PRECONDITION, "navigation needs a base, and this robot has none")
@@ -227,7 +229,10 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
                                "nav.local_planner needs a lidar, and this robot has none (set it false in the profile)")
         if path is None:
             goal = _free_goal(ctx, cm, goal, label)
-        drive = LocalDrive(ctx, base, lidar, goal, label, config=local_drive_config(ctx, base, max_v), static=cm,
+        config = local_drive_config(ctx, base, max_v)
+        if viewpoint:
+            config = replace(config, zone_goal_search=VIEWPOINT_SLACK)
+        drive = LocalDrive(ctx, base, lidar, goal, label, config=config, static=cm,
                            timeout=timeout, path=path, status=base_status)
         return (yield from drive.run())
     if path is None:
@@ -268,6 +273,10 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
 POSE_JUMP = (0.15, 0.15)
 #: re-plans after pose jumps within one drive
 MAX_JUMP_REPLANS = 3
+
+#: [m] how far the local planner may move a viewpoint goal out of an unmapped obstacle's
+#: zone (``drive_path(..., viewpoint=True)``: the search's locations)
+VIEWPOINT_SLACK = 0.6
 
 
 def _require_localised(ctx: SkillContext, base: Base, label: str) -> None:

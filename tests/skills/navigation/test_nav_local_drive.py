@@ -22,9 +22,9 @@ import mmexec.skills.navigation.navigate  # noqa: F401 - registers navigate
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import BaseState, LaserScan, Lidar, OccupancyGrid, Pose2D
 from mmexec.drivers.mock.robot import ManualClock, MockBase, MockRobot
-from mmexec.skills.base import FailureKind, SkillContext, SkillStatus, run_skill
+from mmexec.skills.base import FailureKind, SkillContext, SkillFailure, SkillStatus, run_skill
 from mmexec.skills.navigation.local_drive import WORLD_LOCAL_PLANNER, WORLD_PATH, contact_points
-from mmexec.skills.navigation.navigate import local_drive_config
+from mmexec.skills.navigation.navigate import VIEWPOINT_SLACK, drive_path, local_drive_config
 from mmexec.skills.navigation.synthetic import cast_scan
 
 RES = 0.05
@@ -246,22 +246,39 @@ def test_an_obstacle_the_map_lacks_is_seen_and_passed_by_a_replan(events):
     assert closest[0] > 0.0 and robot.base.contacts == 0
 
 
-def test_a_goal_an_unmapped_box_stands_on_moves_out_of_the_filter_zone(events):
-    """A crate the map lacks stands 0.15 m from the goal (a search viewpoint, say): the
+def _drive_to(robot: MockRobot, ctx: SkillContext, goal: Pose2D, *, viewpoint: bool) -> Pose2D:
+    """drive_path to ``goal`` (a viewpoint or not), ticking the robot; the pose reached."""
+    gen = drive_path(ctx, goal, "the goal", timeout=120.0, viewpoint=viewpoint)
+    for _ in range(6000):
+        try:
+            next(gen)
+        except StopIteration as stop:
+            return stop.value
+        robot.spin(0.05)
+    raise AssertionError("the drive did not end")
+
+
+def test_a_viewpoint_an_unmapped_box_stands_on_moves_out_of_the_filter_zone(events):
+    """A crate the map lacks stands 0.15 m from a viewpoint goal (a search location): the
     base could never get there (the filter guards the crate's zone), so the drive moves
-    the goal to the nearest point outside the zone, within nav's zone_goal_search of the
-    goal asked for, says so, and arrives there without touching the crate."""
+    the goal to the nearest point outside the zone, within VIEWPOINT_SLACK of the goal
+    asked for, says so, and arrives there without touching the crate. Any other goal (a
+    pick's stand-off, the depot stop) is not moved: that drive fails, saying why."""
     crate = (4.0, 1.5, 0.2)
     robot = _robot(room(), Pose2D(1.0, 1.5, 0.0), circles=[crate])
     ctx = _ctx(robot, events)
-    run = _drive(robot, ctx, x=4.0, y=1.65)
-    assert run.status is SkillStatus.SUCCESS, run.failure
+    end = _drive_to(robot, ctx, Pose2D(4.0, 1.65, 0.0), viewpoint=True)
     moved = _of(events, "nav_goal_moved")
-    assert moved and moved[0]["goal"] == [4.0, 1.65] and 0.0 < moved[-1]["by"] <= 0.6
-    end = robot.base.pose
+    assert moved and moved[0]["goal"] == [4.0, 1.65] and 0.0 < moved[-1]["by"] <= VIEWPOINT_SLACK
     assert end.distance_to(Pose2D(*moved[-1]["to"])) <= 0.05
-    assert end.distance_to(Pose2D(4.0, 1.65)) <= 0.6
     assert math.hypot(end.x - crate[0], end.y - crate[1]) > crate[2] + 0.178 and robot.base.contacts == 0
+
+    events.clear()
+    robot = _robot(room(), Pose2D(1.0, 1.5, 0.0), circles=[crate])
+    ctx = _ctx(robot, events)
+    with pytest.raises(SkillFailure, match="inside the zone the safety filter keeps the base out of") as err:
+        _drive_to(robot, ctx, Pose2D(4.0, 1.65, 0.0), viewpoint=False)
+    assert err.value.kind is FailureKind.PLANNING and not _of(events, "nav_goal_moved")
 
 
 def test_a_way_closed_for_good_is_a_planning_failure_after_the_recoveries(events):
