@@ -47,7 +47,14 @@ import quadprog
 
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
 from mmexec.skills.navigation.astar import plan_path
-from mmexec.skills.navigation.cbf import CbfConfig, QpStatus, build_qp, solve_qp
+from mmexec.skills.navigation.cbf import (
+    PAPER_ALPHA,
+    PAPER_ALPHA_TIGHT,
+    CbfConfig,
+    QpStatus,
+    build_qp,
+    solve_qp,
+)
 from mmexec.skills.navigation.grid import inflate
 from mmexec.skills.navigation.limits import LOCOBOT_KOBUKI, UR5E_PLATFORM, BaseLimits
 from mmexec.skills.navigation.local_planner import LocalPlanner, LocalPlannerConfig
@@ -197,9 +204,11 @@ def closed_loop_rows() -> list[str]:
     poles, radii = np.array([[3.0, 3.35], [6.5, 4.0], [7.5, 2.9]]), np.array([0.12, 0.2, 0.15])
     walker = Walker(start=(5.5, 5.2), velocity=(0.0, -0.5), radius=0.22, trigger_x=3.5)
     rows = []
-    for label, alpha, tight, use in (("paper alpha 0.21 / 0.46", 0.21, 0.46, True),
-                                     ("alpha 1.0 / 2.0", 1.0, 2.0, True),
-                                     ("filter off (DWA alone)", 0.21, 0.46, False)):
+    default = CbfConfig()
+    for label, alpha, tight, use in (("paper alpha 0.21 / 0.46", PAPER_ALPHA, PAPER_ALPHA_TIGHT, True),
+                                     (f"alpha {default.alpha:g} / {default.alpha_tight:g} (default)", default.alpha,
+                                      default.alpha_tight, True),
+                                     ("filter off (DWA alone)", default.alpha, default.alpha_tight, False)):
         cfg = LocalPlannerConfig.for_base(LOCOBOT_KOBUKI, 0.05, cbf=CbfConfig(alpha=alpha, alpha_tight=tight),
                                           use_cbf=use)
         r = run_closed_loop(grid, Pose2D(1.0, 3.0, 0.0), (9.0, 3.0), poles, radii, walker, cfg, t_max=120.0)
