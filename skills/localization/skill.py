@@ -44,6 +44,9 @@ def spread(st: BaseState) -> tuple[float, float]:
               doc="re-localise even when the localiser has converged (a suspected kidnap)"),
         Param("turn_speed", float, unit="rad/s", default=0.6, doc="turn rate while localising"),
         Param("min_updates", int, default=5, doc="filter updates after the reset before convergence counts"),
+        Param("min_turn", float, unit="rad", default=2 * math.pi,
+              doc="turn at least this far (a full turn shows the filter every direction, and the reflectors "
+                  "a fix where they are in view: a cloud that converged early on a look-alike place moves on)"),
         Param("timeout", float, unit="s", default=40.0, doc="fail after this much clock time"),
     ],
     outputs=[
@@ -54,9 +57,10 @@ def spread(st: BaseState) -> tuple[float, float]:
     needs=("base",),
 )
 def localize(ctx: SkillContext, force: bool = False, turn_speed: float = 0.6, min_updates: int = 5,
-             timeout: float = 40.0) -> SkillGen:
+             min_turn: float = 2 * math.pi, timeout: float = 40.0) -> SkillGen:
     """Global localisation, then turn in place at ``turn_speed`` until the localiser has
-    converged (at least ``min_updates`` filter updates after the reset). Succeeds at once
+    converged (at least ``min_updates`` filter updates after the reset, and at least
+    ``min_turn`` turned). Succeeds at once
     when already localised (unless ``force``) or when the robot runs no localiser.
     TIMEOUT when not converged within ``timeout``; EXECUTION on a base fault. Turn in a
     place with room: the arm should be stowed."""
@@ -84,7 +88,7 @@ def localize(ctx: SkillContext, force: bool = False, turn_speed: float = 0.6, mi
         th = base.odometry().pose.theta
         turned += abs(math.atan2(math.sin(th - last_theta), math.cos(th - last_theta)))
         last_theta = th
-        if state.localised and loc.updates - start_updates >= min_updates:
+        if state.localised and loc.updates - start_updates >= min_updates and turned >= min_turn:
             return Step.ARRIVED
         return 0.0, w_max
 
