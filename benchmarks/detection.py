@@ -45,6 +45,7 @@ import onnx
 from onnx import TensorProto, helper, numpy_helper
 
 from mmexec.drivers.interfaces import CameraFrame, CameraIntrinsics
+from mmexec.skills.fetch_object.detector import PartsDetector
 from mmexec.skills.perception.detector import ColourBlobDetector
 from mmexec.skills.perception.grasp_point import GraspPointError, estimate_grasp
 from mmexec.skills.perception.synthetic_objects import (
@@ -337,6 +338,8 @@ def detector_benchmark(frames: list[np.ndarray], variants: list[str]) -> None:
     colour = ColourBlobDetector()
     w, c = _time_detect(colour.detect, frames)
     print(f"  classical colour/shape (ColourBlobDetector)         {w:7.1f} / {c:7.1f}")
+    w, c = _time_detect(PartsDetector().detect, frames)
+    print(f"  classical parts of the sim object set (PartsDetector) {w:5.1f} / {c:7.1f}")
     with tempfile.TemporaryDirectory() as tmp:
         for variant in variants:
             path = Path(tmp) / f"yolov5{variant}.onnx"

@@ -97,28 +97,37 @@ class PartsDetector:
                                     cv2.MORPH_CLOSE, k_close)
             second = (cv2.morphologyEx(_mask(hsv, cls.second), cv2.MORPH_CLOSE, k_close)
                       if cls.second else None)
-            n, labels, stats, _ = cv2.connectedComponentsWithStats(main, connectivity=8)
-            for i in range(1, n):
-                if stats[i, cv2.CC_STAT_AREA] < self.min_area:
+            # contours, not connected components: OpenCV's parallel labelling stalled on a busy
+            # machine (80 ms a frame for 17 ms of CPU)
+            mains, _ = cv2.findContours(main, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+            seconds = cv2.findContours(second, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)[0] if second is not None else ()
+            H, W = main.shape
+            for c in mains:
+                area = float(cv2.contourArea(c))
+                if area < self.min_area:
                     continue
-                blob = (labels == i).astype(np.uint8)
-                factor = 1.0
+                factor, parts = 1.0, [c]
                 if second is not None:
-                    near = cv2.dilate(blob, k_join) & second
-                    if near.any():
-                        # the whole second-part blob that touches the main one
-                        _, lab2, _, _ = cv2.connectedComponentsWithStats(second, connectivity=8)
-                        for j in np.unique(lab2[near > 0]):
-                            if j:
-                                blob |= (lab2 == j).astype(np.uint8)
+                    bx, by, bw, bh = cv2.boundingRect(c)
+                    x0, y0 = max(bx - self.join_px, 0), max(by - self.join_px, 0)
+                    x1, y1 = min(bx + bw + self.join_px, W), min(by + bh + self.join_px, H)
+                    blob = np.zeros((y1 - y0, x1 - x0), np.uint8)
+                    cv2.drawContours(blob, [c - np.array([x0, y0])], -1, 1, cv2.FILLED)
+                    near = cv2.dilate(blob, k_join) & second[y0:y1, x0:x1]
+                    ys, xs = np.nonzero(near)
+                    touch = [(float(x + x0), float(y + y0)) for x, y in zip(xs[::7], ys[::7])]
+                    joined = [c2 for c2 in seconds
+                              if any(cv2.pointPolygonTest(c2, pt, False) >= 0 for pt in touch)]
+                    if joined:
+                        parts += joined
+                        area += sum(float(cv2.contourArea(c2)) for c2 in joined)
                     else:
                         factor = 0.6
-                pts = cv2.findNonZero(blob)
+                pts = np.vstack(parts)
                 (_, _), (w, h), _ = cv2.minAreaRect(pts)
-                fill = float(blob.sum()) / max(w * h, 1.0)
-                conf = float(min(1.0, fill) * factor)
-                x, y, bw, bh = cv2.boundingRect(pts)
-                out.append(Detection(cls.name, conf, (int(x), int(y), int(bw), int(bh))))
+                conf = float(min(1.0, area / max(w * h, 1.0)) * factor)
+                x, y, rw, rh = cv2.boundingRect(pts)
+                out.append(Detection(cls.name, conf, (int(x), int(y), int(rw), int(rh))))
         out.sort(key=lambda d: -d.confidence)
         log.debug("parts detector: %d objects", len(out))
         return out
