@@ -239,12 +239,18 @@ DENSE = HolisticConfig(goal_candidates=3000, goal_count=6, attempts=3, tolerance
 
 def _arrive_and_replan(model: HolisticModel, planner: HolisticPlanner, arm: ArmPlanner, robot: Robot, q: Query,
                        goal: Pose2D, goal_arm: tuple[float, ...], rng: np.random.Generator) -> tuple[PlanResult, int]:
-    """The base stops near ``goal`` (2 cm, 0.02 rad standard deviations) and the arm is
+    """The base stops near ``goal`` (2 cm, 0.02 rad standard deviations, in the free
+    space of the inflated map) and the arm is
     re-planned from the stow pose there; a failure plans the whole robot again from the
     pose reached (the skill's second round). The last arm plan and the rounds used."""
     mount = model.description.arm_mount
     for rounds in (1, 2):
-        reached = Pose2D(goal.x + rng.normal(0, 0.02), goal.y + rng.normal(0, 0.02), goal.theta + rng.normal(0, 0.02))
+        reached = goal
+        for _ in range(100):  # navigation stops in free space: no arrival inside an obstacle's inflation
+            reached = Pose2D(goal.x + rng.normal(0, 0.02), goal.y + rng.normal(0, 0.02),
+                             goal.theta + rng.normal(0, 0.02))
+            if q.costmap.is_free(reached.x, reached.y):
+                break
         a = replan_arm(arm, reached, mount, robot.stow, q.pre_grasp, q.world.scene_boxes(), seeds=[goal_arm, *robot.seeds])
         if a.success or rounds == 2:
             return a, rounds

@@ -214,6 +214,10 @@ class HolisticModel:
         self.mount = np.asarray(description.arm_mount if mount is None else mount, dtype=float)
         self.joint_names: tuple[str, ...] = BASE_JOINTS + tuple(kin.joint_names)
         self._items: list[str] = []
+        #: ``(x, y, r)`` [m]: base positions within ``r`` of ``(x, y)`` skip the footprint
+        #: test (a start that stopped a little inside the inflation; the scene still
+        #: checks the base body), None: none
+        self.exempt: tuple[float, float, float] | None = None
         self.use_map(costmap)
         # the first joint's axis point (the shoulder), in arm base: the reach is from there
         w, v = kin.screws[:3, 0], kin.screws[3:, 0]
@@ -310,13 +314,15 @@ class HolisticModel:
         return self.scene.is_valid(q)
 
     def is_valid(self, state: Sequence[float]) -> bool:
-        """Footprint free in the inflated map, then the robot model (base and arm) free in
-        the planning scene at ``state`` (9-D)."""
+        """Footprint free in the inflated map (except within :attr:`exempt`), then the
+        robot model (base and arm) free in the planning scene at ``state`` (9-D)."""
         self.checks += 1
         x, y = state[0], state[1]
         rows, cols, inside = _cells(self.costmap, np.array([x]), np.array([y]))
         if not inside[0] or self.costmap.blocked[rows[0], cols[0]]:
-            return False
+            ex = self.exempt
+            if ex is None or (x - ex[0]) ** 2 + (y - ex[1]) ** 2 > ex[2] ** 2:
+                return False
         return self.arm_valid(x, y, state[2], state[3:])
 
     def collisions(self, state: Sequence[float]) -> list[tuple[str, str]]:
@@ -515,8 +521,10 @@ class HolisticPlanner:
         ``T_map_grasp`` a goal also needs the grasp's IK near it. ``seeds``: arm postures
         that start the goal IK (turned towards the target), e.g. the profile's reach
         pose. ``q_drive``: the arm posture the base drives in (default ``q_start``), which
-        must be free at the goal's base pose too. The scene must have been :meth:`HolisticModel.prepare`-d; it is left with
-        the robot placed anywhere (call :meth:`HolisticModel.release`)."""
+        must be free at the goal's base pose too. A start a little inside the inflated
+        map's obstacles (within 2 cells) may leave them. The scene must have been
+        :meth:`HolisticModel.prepare`-d; it is left with the robot placed anywhere (call
+        :meth:`HolisticModel.release`)."""
         cfg = config or self.config
         m = self.model
         t0 = time.perf_counter()
@@ -535,6 +543,27 @@ class HolisticPlanner:
         if not m.footprint_free(np.array([start.x]), np.array([start.y]))[0] and m.region(start.x, start.y) == 0:
             return fail(f"start ({start.x:.2f}, {start.y:.2f}) is blocked in the inflated map")
         seeds = list(seeds) + [q0]
+        # a base that stopped a little inside the inflation (but clear of everything, as
+        # the scene checks) may leave it: the footprint test spares its surroundings
+        m.exempt = None if m.footprint_free(np.array([start.x]), np.array([start.y]))[0] else \
+            (start.x, start.y, 2.0 * m.costmap.resolution)
+        try:
+            return self._plan(start, state0, q0, drive, target, lo, hi, T_map_pre, T_map_grasp, seeds,
+                              free_approach_rotation, cfg, rng, t0, checks0)
+        finally:
+            m.exempt = None
+
+    def _plan(self, start: Pose2D, state0: np.ndarray, q0: np.ndarray, drive: np.ndarray, target: np.ndarray,
+              lo: np.ndarray, hi: np.ndarray, T_map_pre: np.ndarray, T_map_grasp: np.ndarray | None,
+              seeds: list[Sequence[float]], free_approach_rotation: bool, cfg: HolisticConfig,
+              rng: np.random.Generator, t0: float, checks0: int) -> HolisticResult:
+        """:meth:`plan`'s attempts (its checks done)."""
+        m = self.model
+
+        def fail(reason: str, used: int = 0, goals: int = 0) -> HolisticResult:
+            return HolisticResult(False, reason, time.perf_counter() - t0, attempts=used, goals=goals,
+                                  checks=m.scene.checks - checks0)
+
         used, goals = 0, []
         adjusted = tolerant = False
         found_goals = False

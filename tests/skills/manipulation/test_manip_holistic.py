@@ -137,6 +137,12 @@ def test_blocked_front_query_solved(model, lab):
     assert not any(math.dist((b.x, b.y), (p.x, p.y)) < 0.05
                    for p in [find_standoff(inflate(load_world("lab").occupancy(0.05), 0.178, 0.03), T_marker,
                                            [d]).pose for d in (0.35, 0.45, 0.55)] if p is not None)
+    # a start a little inside the inflation by the south wall (the body clear of it) leaves it
+    near_wall = Pose2D(1.5, 0.19, 0.0)
+    assert not cm.is_free(near_wall.x, near_wall.y)
+    res = planner.plan(near_wall, TUCK, poses.pre_grasp, T_map_grasp=poses.grasp, seeds=[HOME])
+    assert res.success, res.reason
+    assert model.exempt is None
     model.release()
     model.prepare(world.scene_boxes())
 
