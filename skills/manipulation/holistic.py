@@ -566,22 +566,25 @@ class HolisticPlanner:
 
         used, goals = 0, []
         adjusted = tolerant = False
-        found_goals = False
+        loose: set[tuple[float, ...]] = set()  # goals found without the navigation tolerance
         for attempt in range(cfg.attempts):
             if self.stop.is_set():
                 return fail(CANCELLED, used, len(goals))
             used = attempt + 1
-            # attempts that found no goal draw twice the candidates (up to 8 x), and the
+            # attempts after goal-less ones draw twice the candidates (up to 8 x), and the
             # last of several goal-less attempts waives the navigation tolerance
-            acfg = cfg if found_goals else replace(cfg, goal_candidates=cfg.goal_candidates * min(8, 2 ** attempt))
-            last_chance = not found_goals and attempt == cfg.attempts - 1 and attempt > 0
-            if last_chance:
+            acfg = cfg if goals else replace(cfg, goal_candidates=cfg.goal_candidates * min(8, 2 ** attempt))
+            tolerant = bool(goals) or attempt < cfg.attempts - 1 or attempt == 0
+            if not tolerant:
                 acfg = replace(acfg, tolerance=(0.0, 0.0))
-            tolerant = acfg.tolerance != (0.0, 0.0)
             poses, counts = self._candidates(start, target, lo, hi, rng, acfg)
-            goals, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, drive, free_approach_rotation,
-                                               acfg, rng)
-            found_goals = found_goals or bool(goals)
+            new, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, drive, free_approach_rotation,
+                                             acfg, rng)
+            if not tolerant:
+                loose.update(new)
+            # goals accumulate over the attempts (a search that failed to reach them in its
+            # time may reach them, or the new ones, in the next)
+            goals = (goals + new)[-3 * cfg.goal_count:]
             if self.stop.is_set():
                 return fail(CANCELLED, used, len(goals))
             if not goals:
@@ -603,9 +606,10 @@ class HolisticPlanner:
                 if adjusted:
                     path.insert(0, tuple(float(v) for v in state0))
                 end = path[-1]
+                reached = min(goals, key=lambda g: sum((a - b) ** 2 for a, b in zip(g, end)))
                 return HolisticResult(True, "", time.perf_counter() - t0, Pose2D(end[0], end[1], wrap_angle(end[2])),
                                       tuple(end[3:]), path, used, len(goals), m.scene.checks - checks0, adjusted,
-                                      tolerant)
+                                      reached not in loose)
         if self.stop.is_set():
             return fail(CANCELLED, used, len(goals))
         return fail(f"no plan within {cfg.time_limit:g} s x {cfg.attempts} attempts "
