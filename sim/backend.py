@@ -563,8 +563,8 @@ def navigation(section: YDict | None) -> NavMap:
     cfg = parse_section(section)
     mark = section.value_mark("world") if isinstance(section, YDict) and "world" in section else None
     world = load_world(cfg.world, randomize=False, mark=mark)
-    return NavMap(world_map(world), descriptions.get(cfg.robot).info.footprint_radius,
-                  f"the map of world {world.name!r}")
+    return NavMap(replace(world_map(world), reflectors=world_reflectors(world)),
+                  descriptions.get(cfg.robot).info.footprint_radius, f"the map of world {world.name!r}")
 
 
 def item_markers(section: Mapping[str, Any] | None) -> tuple[int, ...]:
