@@ -265,7 +265,14 @@ def load_config(path: str | Path) -> LoadedConfig:
         problems.extend(e.problems)
     _check_paths(p, cfg, raw, spec, problems)
     try:
-        localization_settings(cfg, raw)
+        settings = localization_settings(cfg, raw)
+        if settings is not None and settings.enabled and spec is not None:
+            section = raw.get(cfg.backend)
+            missing = sorted({"base", "lidar"} - spec.section_capabilities(section if isinstance(section, YDict) else None))
+            if missing:
+                problems.add(raw.value_mark("localization"), f"localization: the localiser needs a "
+                             f"{' and a '.join(missing)}, and backend {cfg.backend!r} has none here "
+                             "(set localization.enabled: false)")
     except InputError as e:
         problems.extend(e.problems)
     problems.raise_if_any()

@@ -277,3 +277,14 @@ def test_the_section_binds_with_located_errors() -> None:
     assert "c.yaml:2:8: localization.start" in text
     with pytest.raises(InputError, match=r"smoothing must be in \(0, 1\]"):
         parse_section(load_yaml_text("smoothing: 0\n", "c.yaml"), Mark("c.yaml", 1, 1))
+
+
+def test_a_config_whose_robot_has_no_lidar_is_refused_at_its_localization_section(tmp_path) -> None:
+    from mmexec.executive.config import load_config
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("backend: mock\nmock:\n  capabilities: [base, arm]\nlocalization:\n  enabled: true\n")
+    with pytest.raises(InputError, match=r"c.yaml:5:3: localization: the localiser needs a lidar, and backend 'mock'"):
+        load_config(cfg)
+    cfg.write_text("backend: mock\nmock:\n  capabilities: [base, arm]\nlocalization:\n  enabled: false\n")
+    assert load_config(cfg).config.localization == {"enabled": False}
