@@ -103,6 +103,9 @@ BACK_OFF_SPEED = 0.1
 #: [m] room beyond the footprint a recovery needs round the base to turn once round: an
 #: arm held out (carrying) reaches past the footprint, and swept into furniture it hit it
 RECOVERY_TURN_ROOM = 0.25
+#: [m] the path's direction at the start of a drive is taken to its first point this far
+#: from the base (:meth:`LocalDrive._face_path`)
+FACE_PATH_DISTANCE = 0.3
 #: [m] after a stuck recovery, re-plans first try with the non-person circles this much
 #: wider (:meth:`LocalPlanner.replan_grid`), so a gap the base stood in is left out when
 #: there is another way
@@ -323,7 +326,10 @@ class LocalDrive:
     def _giving_way(self, circles: Circles, pose: Pose2D) -> bool:
         """Someone is walking (tracked speed above the tracker's ``moving_speed``) within
         the social layer's ``slow_gap`` of the base: whatever the base does now (slowing,
-        stopping while the filter holds it), it is giving way, not stuck."""
+        stopping while the filter holds it), it is giving way, not stuck. (Someone
+        standing still beside the base is not counted: waiting for them deadlocked with
+        the sim's people, who wait for the robot in turn; the stuck recovery, turning and
+        backing off, breaks that.)"""
         people = circles.people
         if not len(people):
             return False
@@ -475,9 +481,26 @@ class LocalDrive:
     def _timed_out(self, now: float) -> bool:
         return now > self._deadline
 
+    def _face_path(self) -> Generator[None, None, None]:
+        """As the plain drive's tracker does: when the path leaves more than the tracker's
+        ``turn_in_place_angle`` off the base's heading, turn in place to it first. The DWA
+        would turn while driving off, in an arc that swung the base half a metre off the
+        path (after a pick, facing the shelf, with the path to the depot behind it), and
+        the arm held out with it (into the lab's crate by the depot)."""
+        pose = self.base.state().pose
+        path = self._path or []
+        ahead = next(((x, y) for x, y in path if math.hypot(x - pose.x, y - pose.y) > FACE_PATH_DISTANCE), None)
+        if ahead is None:
+            return
+        direction = math.atan2(ahead[1] - pose.y, ahead[0] - pose.x)
+        if abs(wrap_angle(direction - pose.theta)) > self.config.tracker.turn_in_place_angle:
+            yield from self._turn_to(direction)
+            self.planner.reset_command()
+
     def _follow(self) -> Generator[None, None, None]:
         """Tick the local planner until the goal is reached (then turn to its heading)."""
         ctx, base, cfg = self.ctx, self.base, self.config
+        yield from self._face_path()
         while True:
             faults = self._check_faults()
             if faults:
