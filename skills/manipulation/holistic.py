@@ -106,7 +106,8 @@ class HolisticConfig:
     ``time_limit`` [s] of OMPL's search per attempt and ``attempts`` (each with fresh goal
     samples); ``box`` [m]: the base's x and y bounds either side of the start
     (widened to hold the target's surroundings); ``range``
-    [m|rad] OMPL's step (0: its default); ``resolution`` [m|rad]: longest step between two
+    [m|rad] OMPL's step (0: its default, a fifth of the space's extent: metres and
+    radians here, so most steps near the target collide); ``resolution`` [m|rad]: longest step between two
     checked states of an edge (Euclidean over the 9 coordinates, so no coordinate moves
     more); ``goal_count`` goal states per attempt, drawn from ``goal_candidates`` base
     poses; ``yaw_spread`` [rad]: the arm base faces the target within this; ``min_reach``
@@ -120,7 +121,7 @@ class HolisticConfig:
     time_limit: float = 1.0
     attempts: int = 5
     box: float = 2.5
-    range: float = 0.0
+    range: float = 0.5
     resolution: float = 0.03
     goal_count: int = 6
     goal_candidates: int = 300
