@@ -6,7 +6,8 @@ DIR is a campaign directory run with ``--faults benchmarks/campaigns/objects_tru
 (so each trial's ground truth is in ``DIR/truth/SEED.jsonl``). For every trial it reads
 the requested item (``DIR/trials.csv``), the trial's outcome, and the truth log's
 ``grasp`` records (sim/truth.py: which parts of an object the gripper's pads touched when
-they closed on it). A trial of a dangerous item (an object with a part sim/objects.py
+they closed on it) and ``objects_end`` record (where each object ended up: in the depot
+basket or not, the delivery the mission's own outcome cannot see). A trial of a dangerous item (an object with a part sim/objects.py
 marks dangerous) counts as *on the dangerous part* when the last grasp of that item
 touched that part. Prints one line per item and the totals; the last line is
 ``dangerous_part_contact: X`` (fraction of the dangerous-item trials).
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -24,11 +26,25 @@ from mmexec.config.yamlload import load_yaml
 from mmexec.sim.world import load_world
 
 
+def _in_depot(campaign: Path, xyz: list[float]) -> bool:
+    """Whether a point [m] in map lies in one of the world's depot baskets (inside the walls,
+    below the rim + 5 cm), as SimTruth.in_depot tests it."""
+    cfg = load_yaml(campaign / "config.yaml")
+    world = load_world(str(cfg["sim"].get("world", "lab")))
+    for d in world.spec.depots:
+        c, s = math.cos(d.pose[2]), math.sin(d.pose[2])
+        dx, dy = xyz[0] - d.pose[0], xyz[1] - d.pose[1]
+        lx, ly = c * dx + s * dy, -s * dx + c * dy
+        if abs(lx) < d.size[0] / 2 and abs(ly) < d.size[1] / 2 and xyz[2] < d.size[2] + 0.05:
+            return True
+    return False
+
+
 def score(campaign: Path) -> tuple[dict[str, list[int]], int, int]:
-    """Per item: [trials, successes, dangerous-part contacts]; and the dangerous trials and
-    contacts over all items."""
+    """Per item: [trials, successes, dangerous-part contacts, in the basket by the truth];
+    and the dangerous trials and contacts over all items."""
     dangerous = _dangerous_parts(campaign)
-    rows: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0])
+    rows: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
     n_dangerous = hits = 0
     with (campaign / "trials.csv").open() as f:
         for row in csv.DictReader(f):
@@ -36,14 +52,14 @@ def score(campaign: Path) -> tuple[dict[str, list[int]], int, int]:
             r = rows[item]
             r[0] += 1
             r[1] += row["outcome"] == "success"
+            truth = campaign / "truth" / f"{row['seed']}.jsonl"
+            records = list(map(json.loads, truth.read_text().splitlines())) if truth.is_file() else []
+            end = next((g for g in records if g.get("event") == "objects_end"), None)
+            r[3] += bool(end and item in end["positions"] and _in_depot(campaign, end["positions"][item]))
             if not dangerous.get(item):
                 continue
             n_dangerous += 1
-            truth = campaign / "truth" / f"{row['seed']}.jsonl"
-            grasps = []
-            if truth.is_file():
-                grasps = [g for g in map(json.loads, truth.read_text().splitlines())
-                          if g.get("event") == "grasp" and g.get("item") == item]
+            grasps = [g for g in records if g.get("event") == "grasp" and g.get("item") == item]
             if grasps and dangerous[item] & set(grasps[-1]["parts"]):
                 r[2] += 1
                 hits += 1
@@ -59,9 +75,12 @@ def main(argv: list[str]) -> int:
         rows, nd, nh = score(d)
         flagged = _dangerous(d)
         print(f"{d}:")
-        for item, (n, ok, hit) in sorted(rows.items()):
+        for item, (n, ok, hit, basket) in sorted(rows.items()):
             extra = f", pads on the dangerous part {hit}/{n}" if item in flagged else ""
-            print(f"  {item}: {ok}/{n} delivered{extra}")
+            print(f"  {item}: {ok}/{n} succeeded, {basket}/{n} in the basket (truth){extra}")
+        total = sum(r[0] for r in rows.values())
+        print(f"  all: {sum(r[1] for r in rows.values())}/{total} succeeded, "
+              f"{sum(r[3] for r in rows.values())}/{total} in the basket (truth)")
         total_d += nd
         total_h += nh
     frac = total_h / total_d if total_d else float("nan")

@@ -230,6 +230,10 @@ class TruthLog:
         """Write the summary and close the file."""
         if self._out.closed:
             return
+        if self._objects:  # where each untagged object ended up (delivered or not)
+            self._write("objects_end", positions={
+                n: [round(float(v), 4) for v in p.getBasePositionAndOrientation(b, physicsClientId=self._core.cid)[0]]
+                for n, b in self._core.scene.items.items() if n in self._objects})
         c, where = self.min_clearance
         panels = self._core.scene.panels
         if panels is not None:

@@ -260,6 +260,9 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     if raised > 0:
         ctx.emit("place_raised", by=raised, node=ctx.node_path)
     yield from execute(ctx, res, "place pose")
+    held, why = holding(ctx, arm.min_held_width)
+    if not held:  # dropped on the way (the gripper says so): releasing would report a delivery that is not
+        raise SkillFailure(FailureKind.POSTCONDITION, f"place: {name} lost before the place pose ({why})")
     yield from release(ctx, arm.grasp_force)
     q = measured_joints(ctx)
 

@@ -255,8 +255,8 @@ def scan_for(ctx: SkillContext, item: CatalogueItem) -> Generator[None, None, Ob
     try:
         yield from scan(ctx, label=item.detector_class, size=list(item.size))
     except SkillFailure as e:
-        if e.kind is not FailureKind.EXECUTION or not e.reason.startswith("no "):
-            raise
+        if e.kind is not FailureKind.EXECUTION or not e.reason.startswith("scan: no "):
+            raise  # a camera or head fault, not an empty view
         return None
     res = ctx.world.get(WORLD_SCAN)
     obj = res.best(item.detector_class) if isinstance(res, ScanResult) else None
