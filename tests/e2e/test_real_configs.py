@@ -21,7 +21,7 @@ import pytest
 from mmexec.config.yamlload import YDict
 from mmexec.drivers import robot as robot_backend
 from mmexec.drivers.kobuki.base import KobukiBase
-from mmexec.executive.config import load_config
+from mmexec.executive.config import load_config, load_skill_modules
 from mmexec.sim.models import MODEL_INFO
 from mmexec.sim.world import load_world
 from mmexec.skills.fetch import FetchProfile
@@ -40,7 +40,9 @@ CONFIGS = {
 
 
 def _profile(loaded) -> dict[str, Any]:
-    """The config's profile sections, bound (fetch, nav, arm, camera, search, ...)."""
+    """The config's profile sections, bound (fetch, nav, arm, camera, search, ...), with
+    every built-in skill module loaded, as a run loads them (each declares its section)."""
+    load_skill_modules(loaded)
     raw = loaded.raw["profile"]
     bound, problems = PROFILE.check(raw, raw.mark)
     assert not problems, [str(p) for p in problems]
