@@ -29,15 +29,15 @@ pytestmark = pytest.mark.slow
 
 
 def run_objects(tmp_path: Path, items: list[str], *, answers: Path | None = None, seed: int = 0,
-                edit: tuple[str, str] | None = None) -> dict[str, Any]:
+                edit: tuple[str, str] | None = None, config: Path = CONFIG) -> dict[str, Any]:
     """Serve one ``item=NAME`` request per entry (in-process Runner, as ``mmexec run``),
     with ``answers`` as ``--answers`` and ``edit`` (old, new) applied to the config text;
     returns the results, the event log and the robot (for its ground truth)."""
-    text = CONFIG.read_text()
+    text = config.read_text()
     if edit is not None:
         assert edit[0] in text
         text = text.replace(edit[0], edit[1])
-    cfg = tmp_path / CONFIG.name
+    cfg = tmp_path / config.name
     cfg.write_text(text)
     log_path = tmp_path / "events.jsonl"
     out = io.StringIO()
@@ -147,3 +147,14 @@ def test_a_box_behind_a_crate_is_fetched_from_the_holistic_planners_base_pose(tm
     plans = events(run, "holistic_plan")
     assert plans and plans[-1]["success"]
     assert [g for g in events(run, "object_grasp") if g["mode"] == "front"]
+
+
+def test_the_ur5e_fetches_the_pliers_with_its_wrist_camera(tmp_path: Path) -> None:
+    # the same mission on the UR5e platform: one wrist view per scan, look_near from the
+    # stand-off, a top grasp corrected by the operator's click on the head
+    run = run_objects(tmp_path, ["pliers"], answers=SIM_CLICK, config=REPO / "config" / "ur5e_objects_sim.yaml")
+    assert [r.outcome for r in run["results"]] == ["success"], run["out"]
+    truth = run["truth"][0]
+    assert truth["in_depot"]["pliers"] == "depot"
+    assert "head" in [parts for item, parts in truth["grasps"] if item == "pliers"][-1]
+    assert events(run, "object_estimate")[-1]["where"] == "stand-off"  # seen again from the stand-off
