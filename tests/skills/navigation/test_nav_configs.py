@@ -1,0 +1,36 @@
+"""The local-planner configs are their base configs with the local planner switched on
+(docs/algorithms.md, "Navigation stack"): the same robot, world and profile, so campaigns
+compare the two navigation stacks and nothing else. A change to a base config must be
+made to its local twin too; this test says which lines differ."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[3]
+LOCAL_LINE = "    local_planner: true           # DWA + CLF-CBF on the lidar costmap (needs the lidar)"
+NO_FILTER_LINE = "    safety_filter: false          # the DWA alone (comparison)"
+
+#: (twin, base config, the lines the twin adds below its header comment)
+TWINS = [
+    ("config/locobot_sim_local.yaml", "config/locobot_sim.yaml", [LOCAL_LINE]),
+    ("config/ur5e_sim_local.yaml", "config/ur5e_sim.yaml", [LOCAL_LINE]),
+    ("config/ur3e_sim_local.yaml", "config/ur3e_sim.yaml", [LOCAL_LINE]),
+    ("benchmarks/nav_configs/locobot_lab_nofilter.yaml", "config/locobot_sim.yaml", [LOCAL_LINE, NO_FILTER_LINE]),
+]
+
+
+def _body(path: Path) -> list[str]:
+    """The file's lines from ``backend:`` on (the header comment says what it is)."""
+    lines = path.read_text().splitlines()
+    return lines[next(i for i, line in enumerate(lines) if line.startswith("backend:")):]
+
+
+@pytest.mark.parametrize(("twin", "base", "added"), TWINS, ids=[t[0] for t in TWINS])
+def test_a_local_planner_config_is_its_base_config_with_the_switch_on(twin, base, added):
+    twin_lines, base_lines = _body(REPO / twin), _body(REPO / base)
+    assert [line for line in twin_lines if line not in added] == base_lines, (
+        f"{twin} differs from {base} beyond {added}: keep the two in step")
+    assert all(line in twin_lines for line in added)
