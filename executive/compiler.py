@@ -6,6 +6,7 @@ Public API (used by the runner and the CLI)::
     mission.path, mission.name, mission.files, mission.sha256
     mission.params            # name -> ParamDecl (type, default, has_default, doc)
     mission.request_fields    # name -> type
+    mission.request_defaults  # name -> default, for the optional request fields
     request = mission.validate_request({"item": "3"})    # -> {"item": 3}, or ValueError
     tree = mission.instantiate(ctx, request, params=None) # a fresh MissionTree
 
@@ -19,6 +20,7 @@ contract of docs/missions.md.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import logging
 import math
@@ -158,21 +160,27 @@ class Mission:
     root_file: FileSpec
     registry: SkillRegistry
     node_count: int = 0
+    #: the declared defaults of the optional request fields (a subset of request_fields)
+    request_defaults: dict[str, Any] = field(default_factory=dict)
     _hashes: dict[Path, str] = field(default_factory=dict, repr=False)
 
     def validate_request(self, request: Mapping[str, Any]) -> dict[str, Any]:
         """Check a request against the declared fields and convert CLI strings ("3")
-        to the declared types. Raises ValueError (one line) on unknown, missing or
-        wrongly typed fields."""
+        to the declared types; a field left out takes its declared default (a fresh
+        copy). Raises ValueError (one line) on unknown, missing (required) or wrongly
+        typed fields."""
         out: dict[str, Any] = {}
         for k in request:
             if k not in self.request_fields:
                 known = ", ".join(self.request_fields) or "none"
                 raise ValueError(f"request: unknown field {k!r}{did_you_mean(k, self.request_fields)} (mission {self.name} takes: {known})")
         for k, tp in self.request_fields.items():
-            if k not in request:
+            if k in request:
+                out[k] = convert_value(tp, request[k], f"request field {k!r}")
+            elif k in self.request_defaults:
+                out[k] = copy.deepcopy(self.request_defaults[k])
+            else:
                 raise ValueError(f"request: missing field {k!r} ({tp.__name__})")
-            out[k] = convert_value(tp, request[k], f"request field {k!r}")
         return out
 
     def resolve_params(self, params: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -207,8 +215,8 @@ class Mission:
         return MissionTree(root, rt, self)
 
     def display_tree(self) -> MissionTree:
-        """A tree for rendering only: placeholder request, default parameters."""
-        req = {k: _placeholder(tp) for k, tp in self.request_fields.items()}
+        """A tree for rendering only: default (else placeholder) request, default parameters."""
+        req = {k: _placeholder(tp) for k, tp in self.request_fields.items() if k not in self.request_defaults}
         params = {k: _placeholder(d.type) for k, d in self.params.items() if not d.has_default}
         return self.instantiate(None, req, params)
 
@@ -631,6 +639,7 @@ def load_mission(path: str | Path, registry: SkillRegistry = REGISTRY, roots: It
         sha256=h.hexdigest(),
         params=dict(top.params),
         request_fields={k: d.type for k, d in top.requests.items()},
+        request_defaults={k: d.default for k, d in top.requests.items() if d.has_default},
         root_file=top,
         registry=registry,
         node_count=n,

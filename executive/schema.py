@@ -243,8 +243,8 @@ class _Parser:
                 desc = doc["description"]
             else:
                 self.err(doc.value_mark("description"), f"description: expected a string, got {_tname(doc['description'])}")
-        self.params = self.decls(doc, "params", allow_default=True)
-        requests = self.decls(doc, "requests", allow_default=False)
+        self.params = self.decls(doc, "params")
+        requests = self.decls(doc, "requests")
         tree: NodeSpec | None = None
         if "tree" not in doc:
             self.err(doc.mark, "missing required key 'tree' (the root node)")
@@ -255,7 +255,9 @@ class _Parser:
         return FileSpec(self.path, name, desc, self.params, requests, tree, doc.mark, self.reads, self.writes,
                         self.includes, self.typed_reads, self.recoveries, self.formatted_reads)
 
-    def decls(self, doc: YDict, key: str, allow_default: bool) -> dict[str, ParamDecl]:
+    def decls(self, doc: YDict, key: str) -> dict[str, ParamDecl]:
+        """The ``params:`` or ``requests:`` section: name -> declaration. A ``default`` must
+        be finite and of the declared type (a request field with one is optional)."""
         out: dict[str, ParamDecl] = {}
         if key not in doc or doc[key] is None:
             return out
@@ -275,12 +277,10 @@ class _Parser:
                 self.err(vm, f"{key}.{name}: expected {{type: ...}} or a type name, got {d!r}")
                 continue
             ok = True
-            allowed = DECL_KEYS if allow_default else ("type", "doc")
             for k in d:
-                if k not in allowed:
-                    hint = did_you_mean(k, allowed)
-                    extra = " (request fields have no default: a request must give them)" if k == "default" else ""
-                    self.err(d.key_mark(k), f"{key}.{name}: unknown key {k!r}{hint or extra or ' (expected one of: ' + ', '.join(allowed) + ')'}")
+                if k not in DECL_KEYS:
+                    hint = did_you_mean(k, DECL_KEYS)
+                    self.err(d.key_mark(k), f"{key}.{name}: unknown key {k!r}{hint or ' (expected one of: ' + ', '.join(DECL_KEYS) + ')'}")
                     ok = False
             tp_name = d.get("type")
             if "type" not in d:
@@ -299,11 +299,10 @@ class _Parser:
                 decl.default, decl.has_default = d["default"], True
                 before = len(self.p)
                 refuse_nonfinite(d["default"], d.value_mark("default"), f"{key}.{name}.default", self.p)
+                if len(self.p) == before and not accepts(tp, d["default"]):
+                    self.err(d.value_mark("default"), f"{key}.{name}: default {d['default']!r} is not {tp_name}")
                 if len(self.p) > before:  # keep the declaration: its uses are not also problems
                     decl.default, decl.has_default = None, False
-                elif not accepts(tp, d["default"]):
-                    self.err(d.value_mark("default"), f"{key}.{name}: default {d['default']!r} is not {tp_name}")
-                    ok = False
             if ok:
                 out[name] = decl
         return out

@@ -279,12 +279,13 @@ class Service:
 
     def submit(self, body: Any) -> QueuedRequest:
         """Queue a request: ``body`` is a JSON object of request fields, checked exactly as
-        ``--request`` is. 422 bad fields, 409 stopping, 429 queue full."""
+        ``--request`` is (a field left out takes its declared default; a list or dict field
+        may also be given as JSON). 422 bad fields, 409 stopping, 429 queue full."""
         where = "POST /api/requests"
         if not isinstance(body, dict):
             raise ServiceError(422, f"{where}: expected a JSON object of request fields, e.g. {{\"item\": 3}}")
-        for k, v in body.items():
-            if isinstance(v, (dict, list)):
+        for k, v in body.items():  # a JSON list or object only for a field declared list or dict
+            if isinstance(v, (dict, list)) and self.mission.request_fields.get(k) not in (list, dict):
                 raise ServiceError(422, f"{where}: request field {k!r}: expected a scalar value")
         try:
             fields = dict(self.mission.validate_request(body))

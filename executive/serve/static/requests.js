@@ -30,13 +30,16 @@ export class RequestForm {
     this.inputs.clear();
     const rows = mission.requests.map((f) => {
       let input;
+      // a field with a default may be left empty (the service then uses the default)
+      const dflt = "default" in f ? `default: ${JSON.stringify(f.default)}` : null;
       if (f.type === "bool") {
         input = el("select", {id: `field-${f.name}`, name: f.name},
+          dflt ? el("option", {value: ""}, dflt) : "",
           el("option", {value: "true"}, "true"), el("option", {value: "false"}, "false"));
       } else {
         input = el("input", {id: `field-${f.name}`, name: f.name, type: "text", autocomplete: "off",
                              spellcheck: "false", inputmode: f.type === "int" || f.type === "float" ? "decimal" : null,
-                             placeholder: HINT[f.type] || f.type});
+                             placeholder: dflt ? `${HINT[f.type] || f.type} (${dflt})` : HINT[f.type] || f.type});
       }
       this.inputs.set(f.name, input);
       return el("div", {class: "field"},
