@@ -11,6 +11,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from mmexec.config.yamlload import InputError
+from mmexec.executive.campaign import CampaignOptions, RequestPlan, run_campaign
 from mmexec.executive.cli import _cli_requests
 from mmexec.executive.compiler import load_mission
 from mmexec.executive.config import load_skill_modules
@@ -150,3 +151,20 @@ def test_press_buttons_takes_its_buttons_per_request() -> None:
     assert m.validate_request(given.fields) == {"buttons": ["b3", "b1"]}
     tree = m.instantiate(None, given.fields)
     assert tree.rt.bb["request.buttons"] == ["b3", "b1"]
+
+
+def test_campaign_draws_some_fields_and_the_rest_take_their_defaults(tmp_path: Path) -> None:
+    m, c = write(tmp_path, MISSION), write(tmp_path, CONFIG, "c.yaml")
+    # preflight: a drawn request that leaves out a field with no default fails before any trial
+    bad = CampaignOptions(mission=m, config=c, trials=2, out=tmp_path / "bad", workers=1, progress=False,
+                          requests=RequestPlan(draws={"times": ("1", "3")}))
+    with pytest.raises(InputError) as ei:
+        run_campaign(bad, out=io.StringIO())
+    assert "--draw (trial 0000)" in str(ei.value) and "missing field 'who'" in str(ei.value)
+    ok = CampaignOptions(mission=m, config=c, trials=1, out=tmp_path / "ok", workers=1, progress=False,
+                         requests=RequestPlan(draws={"who": ("ann",)}))
+    _, results = run_campaign(ok, out=io.StringIO())
+    assert [r.outcome for r in results] == ["success"], results
+    assert "--request who=ann" in results[0].command and "times=" not in results[0].command
+    log = Path(results[0].log)
+    assert [r["message"] for r in read_log(log) if r["event"] == "report"] == ["ann x2 ['a', 'b']"]
