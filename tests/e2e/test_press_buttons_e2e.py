@@ -1,8 +1,9 @@
 """End-to-end button presser on the UR5e + 2F-85 sim config (config/ur5e_sim.yaml):
 trees/press_buttons.yaml with no request presses every button of the lab's panel, checked
 against the sim's ground truth (every light on, each press within 5 mm of its button's
-centre); with the panel's markers hidden it gives up with the reason, at home, the base
-stopped and the arm held."""
+centre); a request ``buttons=[b3,b1]`` presses those two in that order and no other; with
+the panel's markers hidden it gives up with the reason, at home, the base stopped and the
+arm held."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import pytest
 
 from mmexec.executive.config import LoadedConfig, build_robot
 from mmexec.executive.eventlog import read_log
-from mmexec.executive.runner import Progress, Runner, RunOptions
+from mmexec.executive.runner import ArgMark, Progress, Request, Runner, RunOptions
 
 REPO = Path(__file__).resolve().parents[2]
 MISSION = REPO / "trees" / "press_buttons.yaml"
@@ -24,7 +25,8 @@ UR5E_SIM = REPO / "config" / "ur5e_sim.yaml"
 pytestmark = pytest.mark.slow
 
 
-def _run(tmp_path: Path, setup: Any = None, seed: int = 0) -> tuple[int, Runner, Any, list[dict[str, Any]]]:
+def _run(tmp_path: Path, setup: Any = None, seed: int = 0,
+         requests: list[Request] | None = None) -> tuple[int, Runner, Any, list[dict[str, Any]]]:
     holder: dict[str, Any] = {}
 
     def factory(loaded: LoadedConfig) -> Any:
@@ -36,7 +38,7 @@ def _run(tmp_path: Path, setup: Any = None, seed: int = 0) -> tuple[int, Runner,
 
     log = tmp_path / "events.jsonl"
     out = io.StringIO()
-    runner = Runner(RunOptions(mission=MISSION, config=UR5E_SIM, requests=[], seed=seed, log_path=log), out=out,
+    runner = Runner(RunOptions(mission=MISSION, config=UR5E_SIM, requests=requests or [], seed=seed, log_path=log), out=out,
                     err=out, progress=Progress(io.StringIO(), enabled=False), robot_factory=factory)
     at_end: dict[str, Any] = {}
 
@@ -64,6 +66,15 @@ def test_every_button_pressed_within_5_mm(tmp_path: Path) -> None:
     fit = next(r for r in records if r["event"] == "panel_fit")
     assert len(fit["markers"]) >= 5 and fit["rms_mm"] < 3.0
     assert truth["base"].distance_to(type(truth["base"])(1.5, 2.0, 0.0)) < 0.15  # back home
+
+
+def test_requested_buttons_in_the_requested_order(tmp_path: Path) -> None:
+    code, runner, truth, records = _run(tmp_path, requests=[Request({"buttons": "[b3,b1]"}, ArgMark("--request", 1, 1))])
+    assert code == 0 and [r.outcome for r in runner.results] == ["success"]
+    assert truth["lights"] == {"panel/b1": True, "panel/b2": False, "panel/b3": True}
+    assert [p.button for p in truth["presses"] if p.switched] == ["b3", "b1"]
+    result = next(r for r in records if r["event"] == "buttons_result")
+    assert result["outcomes"] == {"b3": "pressed", "b1": "pressed"} and result["trajectories"] == "4/4"
 
 
 def test_hidden_panel_markers_give_up_at_home_safely(tmp_path: Path) -> None:
