@@ -187,6 +187,8 @@ class Mission:
         """Declared defaults overridden by ``params`` (CLI strings converted). ValueError."""
         params = params or {}
         for k in params:
+            if k in self.request_fields and k not in self.params:
+                raise ValueError(f"params: {k!r} is a request field of mission {self.name}, not a parameter (give it per request: --request {k}=...)")
             if k not in self.params:
                 raise ValueError(f"params: unknown parameter {k!r}{did_you_mean(k, self.params)} (mission {self.name} declares: {', '.join(self.params) or 'none'})")
         out: dict[str, Any] = {}

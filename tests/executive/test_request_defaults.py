@@ -168,3 +168,10 @@ def test_campaign_draws_some_fields_and_the_rest_take_their_defaults(tmp_path: P
     assert "--request who=ann" in results[0].command and "times=" not in results[0].command
     log = Path(results[0].log)
     assert [r["message"] for r in read_log(log) if r["event"] == "report"] == ["ann x2 ['a', 'b']"]
+
+
+def test_a_request_field_given_as_a_parameter_says_so(tmp_path: Path) -> None:
+    m = load_mission(write(tmp_path, MISSION))
+    with pytest.raises(ValueError, match=r"'times' is a request field of mission counted, not a parameter "
+                                         r"\(give it per request: --request times=\.\.\.\)"):
+        m.resolve_params({"times": "3"})
