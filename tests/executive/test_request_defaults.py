@@ -23,7 +23,11 @@ from mmexec.executive.serve.service import Service, ServiceError
 from mmexec.skills.base import REGISTRY
 
 REPO = Path(__file__).resolve().parents[2]
-load_skill_modules(None)  # the built-in skills (report, press_buttons, ...), as a run loads them
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _builtin_skills() -> None:
+    load_skill_modules(None)  # the built-in skills (report, press_buttons, ...), as a run loads them
 
 MISSION = """\
 mission: counted
