@@ -215,7 +215,8 @@ def create_app(service: Service, *, token: str | None = None) -> Any:
 
     @app.post("/api/requests", status_code=202, summary="Queue a request (checked like --request)")
     def submit(fields: dict[str, Any] = Body(..., examples=[{"item": 3}],  # noqa: B008
-                                             description="the request's fields, as the mission declares them")
+                                             description="the request's fields, as the mission declares them "
+                                                         "(one with a default may be left out)")
                ) -> dict[str, Any]:
         return service.submit(fields).to_json()
 

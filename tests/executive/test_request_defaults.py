@@ -142,6 +142,8 @@ def test_serve_submit_leaves_out_a_defaulted_field(tmp_path: Path) -> None:
         svc.submit({"who": "b", "times": [1]})
     r = client.post("/api/requests", json={"times": 1})
     assert r.status_code == 422 and "missing field 'who'" in r.json()["error"]
+    body = client.get("/openapi.json").json()["paths"]["/api/requests"]["post"]["requestBody"]
+    assert "one with a default may be left out" in str(body)
     # the request form shows which fields may be left empty, and their defaults
     fields = {f["name"]: f for f in mission_json(mission)["requests"]}
     assert "default" not in fields["who"] and fields["times"]["default"] == 2 and fields["tags"]["default"] == ["a", "b"]
