@@ -543,12 +543,13 @@ def _recovery_names(
             continue
         if again is not None:
             inner = _namespace(fs, spec, inner, again, problems)
+        taken = [p for p in inner if p in names]
+        if taken:  # one problem per include: its name is taken (also for the others it brings)
+            more = f" (and {len(taken) - 1} more of its recoveries)" if len(taken) > 1 else ""
+            problems.add(mark, f"include {path!r}: {taken[0]!r} is already in the tree (recovery at {names[taken[0]]})"
+                               f"{more}: {_again(again)}; give this include a distinct `name:`")
         for prefix, where in inner.items():
-            if prefix in names:
-                problems.add(mark, f"include {path!r}: {prefix!r} is already in the tree (recovery at {names[prefix]}): "
-                                   f"{_again(again)}; give this include a distinct `name:`")
-            else:
-                names[prefix] = where
+            names.setdefault(prefix, where)
     busy.discard(key)
     memo[key] = names
     return names
