@@ -285,3 +285,21 @@ def test_the_sim_robots_map_carries_the_world_reflectors() -> None:
         assert r.occupancy.reflectors[0].position == pytest.approx(r.world.spec.reflectors[0].position)
     finally:
         r.close()
+
+
+def test_the_realistic_odometry_campaign_profile_sets_the_profile_and_combines() -> None:
+    from mmexec.executive.campaign.faults import load_fault_profile, merge_patch
+
+    prof = load_fault_profile("realistic_odometry")
+    section = {"world": "lab", "odometry_noise": {"linear": 0.02}, "faults": {"kidnap": {"at": 3.0}}}
+    out = section
+    for patch in prof.patches["sim"]:
+        out = merge_patch(out, patch)
+    assert out["odometry_noise"] == {"linear": 0.02, "profile": "realistic"} and "faults" not in out
+    assert parse_section(out).odometry_noise.model() == replace(ODOMETRY_PROFILES["realistic"], linear=0.02)
+    both = load_fault_profile("crowd+realistic_odometry").patches["sim"]
+    out = section
+    for patch in both:
+        out = merge_patch(out, patch)
+    assert out["faults"] == {"crowd": {}} and out["odometry_noise"]["profile"] == "realistic"
+    assert "mock" not in prof.patches   # sim only: the mock has no odometry to drift
