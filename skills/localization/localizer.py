@@ -217,10 +217,6 @@ def _apply(T: np.ndarray, pose: Pose2D) -> Pose2D:
     return Pose2D(float(x), float(y), float(wrap_angle(pose.theta + math.atan2(T[1, 0], T[0, 0]))))
 
 
-def _pose(a: np.ndarray) -> Pose2D:
-    return Pose2D(float(a[0]), float(a[1]), float(a[2]))
-
-
 class Localizer:
     """AMCL on ``grid`` (its :attr:`~mmexec.drivers.interfaces.OccupancyGrid.reflectors`
     as landmarks unless ``settings.reflectors`` is false), fed by ``lidar`` and the raw
