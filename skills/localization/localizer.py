@@ -308,7 +308,10 @@ class Localizer:
         if ran:
             self.updates += 1
         self._watch_fit(scan, odom)
-        self._publish(odom)
+        if ran:
+            self._publish(odom)
+        else:  # a rest check: the flag may change, the correction does not (the pose holds still)
+            self._snap = replace(self._snap, localised=bool(self.filter.estimate().converged) and not self.lost)
         return ran
 
     def _start(self, scan: LaserScan, odom: Pose2D) -> None:
