@@ -148,8 +148,8 @@ def fruit_report_lines(fruit: dict[str, Any]) -> list[str]:
         "",
         "## Fruit (ground truth + event log)",
         "",
-        (f"- trials with fruit: {fruit['trials']}; fruit on the plants: {fruit['fruit']}, picked (off the plant): "
-        f"{fruit['picked']}, in a basket: {fruit['in_basket']}"),
+        (f"- trials with fruit: {fruit['trials']}; fruit on the plants: {fruit['fruit']}, picked (held and pulled "
+         f"off): {fruit['picked']}, in a basket: {fruit['in_basket']}, knocked off: {fruit['knocked_off']}"),
         (f"- reachable fruit picked per trial: mean {pct(fruit['picked_fraction_per_trial']['mean'])}, "
         f"min {pct(fruit['picked_fraction_per_trial']['min'])}; trials with >= 90 %: "
         f"{fruit['trials_at_least_90pct_picked']}/{fruit['trials']}"),
