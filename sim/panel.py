@@ -39,7 +39,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import pybullet as p
 
 from mmexec.drivers.geometry import planar_transform, position_quat
 
@@ -258,6 +257,7 @@ class SimPanels:
         return out
 
     def _spawn_one(self, panel: Panel, T: np.ndarray, texture_path: Any, group: int, mask: int) -> None:
+        import pybullet as p  # here: the world schema loads without the engine (mapgen, validate)
         cid = self.cid
         masses, cols, viss, poss, axes, types, textures = [], [], [], [], [], [], []
         caps: list[tuple[PanelButton, int, int]] = []
@@ -324,6 +324,7 @@ class SimPanels:
 
     def step(self, now: float) -> None:
         """After a physics step at clock time ``now`` [s]: latch lights, follow presses."""
+        import pybullet as p  # here: the world schema loads without the engine (mapgen, validate)
         for cap in self.caps:
             q = float(p.getJointState(cap.body, cap.link, physicsClientId=self.cid)[0])
             b = cap.button
@@ -351,6 +352,7 @@ class SimPanels:
     def _press_point(self, cap: _Cap) -> tuple[float, float] | None:
         """Centre [x, y] in the panel frame of the bounding boxes of the other bodies' links
         touching the cap, or None."""
+        import pybullet as p  # here: the world schema loads without the engine (mapgen, validate)
         touching = {(c[2], c[4]) for c in p.getContactPoints(bodyA=cap.body, linkIndexA=cap.link, physicsClientId=self.cid)}
         if not touching:
             return None
@@ -383,6 +385,7 @@ class SimPanels:
     def hide_markers(self, panel: str) -> None:
         """Sim-only fault/test helper: the panel's face markers stop being visible (the
         locator stays)."""
+        import pybullet as p  # here: the world schema loads without the engine (mapgen, validate)
         cap = next((c for c in self.caps if c.panel.name == panel), None)
         if cap is None:
             raise KeyError(f"no panel {panel!r}")
@@ -392,6 +395,7 @@ class SimPanels:
 
     def remove_button(self, panel: str, button: str) -> None:
         """Sim-only fault/test helper: take a button's cap off (it can no longer be pressed)."""
+        import pybullet as p  # here: the world schema loads without the engine (mapgen, validate)
         for c in self.caps:
             if c.panel.name == panel and c.button.name == button:
                 p.changeVisualShape(c.body, c.link, rgbaColor=[0, 0, 0, 0], physicsClientId=self.cid)

@@ -210,7 +210,9 @@ def test_run_fails_fast_naming_the_base_and_its_port(repo_root: Path, tmp_path: 
     if Path(port).exists():
         pytest.skip(f"{port} exists on this machine")
     text = (repo_root / "config" / config).read_text()
-    start, end = text.index("  camera:\n"), text.index("  # The lab's occupancy map")
+    start = text.index("  camera:\n")
+    # up to the lidar where there is one (the localiser needs it), else up to the map
+    end = text.index("  lidar:\n") if "\n  lidar:\n" in text else text.index("  # The lab's occupancy map")
     (tmp_path / "config").mkdir()
     cfg = tmp_path / "config" / config
     cfg.write_text(text[:start] + text[end:])

@@ -167,7 +167,7 @@ def test_reflector_dropout_covers_the_reflectors_for_its_interval_only() -> None
                "faults": {"reflector_dropout": {"intervals": [[1.0, 2.0]]}}},
               profile={}, seed=0, options={})  # type: ignore[arg-type]
     try:
-        r.core.place_base(Pose2D(4.0, 2.5, 0.3))  # sees all three posts (the panel and the plant hide some elsewhere)
+        r.core.place_base(Pose2D(4.0, 2.5, 0.3))  # sees all six posts (the panel and the plant hide some elsewhere)
         before = r.lidar.scan()
         r.spin(1.5)
         during = r.lidar.scan()
@@ -176,7 +176,7 @@ def test_reflector_dropout_covers_the_reflectors_for_its_interval_only() -> None
     finally:
         r.close()
     assert before is not None and during is not None and after is not None
-    assert _bright_runs(before) == 3 and _bright_runs(after) == 3
+    assert _bright_runs(before) == 6 and _bright_runs(after) == 6
     assert _bright_runs(during) == 0
     assert np.array_equal(before.ranges, during.ranges)  # covered, not removed
     assert during.intensities is not None and during.intensities.max() <= 50 / 63
@@ -193,7 +193,7 @@ def test_reflector_dropout_of_named_reflectors_leaves_the_others() -> None:
     finally:
         r.close()
     assert scan is not None and scan.intensities is not None
-    assert _bright_runs(scan) == 2
+    assert _bright_runs(scan) == 5  # the lab's six posts but refl_se
     assert set(np.unique(scan.intensities)) <= {0.0, 0.2, 1.0}  # the binary model, as before
 
 
