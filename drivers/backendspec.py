@@ -116,7 +116,6 @@ class BackendSpec(Generic[Parsed]):
     faults_off: Mapping[str, Any] | None = None
     fault_patches: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     randomize_key: str | None = None
-    truth_key: str | None = None
     item_markers: Callable[[Mapping[str, Any] | None], tuple[int, ...]] | None = None
     #: the section key a campaign sets to ``truth/{seed}.jsonl`` (beside DIR/config.yaml) so
     #: each trial writes its ground truth there for the campaign to count (None: no truth)
