@@ -102,7 +102,8 @@ def choice_measures(log_path: Path, truth: dict[str, Any] | None) -> dict[str, i
 def summarize_fruit(out_dir: Path, results: Sequence[Any]) -> dict[str, Any] | None:
     """The campaign's fruit figures over ``results`` (TrialResults: seed, log), from
     ``out_dir/truth/SEED.jsonl`` and each trial's event log; None when no trial has a
-    fruit truth."""
+    fruit truth, or when no trial looked for fruit or moved one (a plant standing in the
+    world of another mission, the fetch in ``lab``, is not measured)."""
     trials = []
     for r in results:
         path = out_dir / "truth" / f"{r.seed}.jsonl"
@@ -120,7 +121,7 @@ def summarize_fruit(out_dir: Path, results: Sequence[Any]) -> dict[str, Any] | N
         ch = choice_measures(log, truth) if log.is_file() else {"choices": 0, "highest": 0, "checked": 0, "matched": 0}
         trials.append({"trial": r.index, "seed": r.seed, "fruit": n, "picked": picked, "knocked_off": knocked,
                        "in_basket": basket, **ch})
-    if not trials:
+    if not any(t["choices"] or t["picked"] or t["knocked_off"] for t in trials):
         return None
     tot = {k: sum(t[k] for t in trials) for k in ("fruit", "picked", "knocked_off", "in_basket", "choices", "highest",
                                                    "checked", "matched")}

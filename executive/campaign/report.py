@@ -114,9 +114,11 @@ def summarize(results: Sequence[TrialResult], identity: Mapping[str, Any] | None
 def _panel_truth(results: Sequence[TrialResult]) -> dict[str, Any]:
     """The control panels' ground truth over the trials that have one (sim/panel.py):
     trials with every light on at the end, switched presses within the tolerance of their
-    button's centre, trials with both, and the press offsets [mm]."""
+    button's centre, trials with both, and the press offsets [mm]. Empty when no trial
+    switched a button: a panel standing in the world of another mission (the fetch in
+    ``lab``) is not measured."""
     rows = [r.truth for r in results if r.truth.get("panel_lights")]
-    if not rows:
+    if not any(t.get("panel_presses") for t in rows):
         return {}
     offsets = [p for t in rows for p in t["panel_presses"] if p is not None]
     presses = sum(len(t["panel_presses"]) for t in rows)
