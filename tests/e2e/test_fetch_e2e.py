@@ -49,7 +49,11 @@ def test_item_in_view_is_fetched_without_searching(tmp_path: Path) -> None:
 
 
 def test_item_behind_the_robot_is_found_by_turning(tmp_path: Path) -> None:
-    run = run_fetch(tmp_path, [5])  # box 5 is on the near shelf, behind the start pose
+    # box 5 is on the near shelf, behind the robot: 0.6 m further north than the lab's start,
+    # so the view that turns to it sees its marker nearly face-on (from the start itself
+    # it is seen only obliquely, and whether a 30-degree view catches it depends on where
+    # the localised turn stops to a degree)
+    run = run_fetch(tmp_path, [5], start=Pose2D(1.5, 2.6, 0.0))
     assert _outcomes(run) == ["success"], run.out
     found = run.events("search_found")
     assert len(found) == 1
