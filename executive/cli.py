@@ -105,7 +105,8 @@ def _parser() -> argparse.ArgumentParser:
     _add_run_options(r)
     r.add_argument("--watch", action="store_true", help="reload the mission between requests when it changes")
     r.add_argument("--answers", type=Path, metavar="FILE",
-                   help="YAML list of answers to ask_operator prompts, in order (default: ask on the terminal)")
+                   help="YAML list of answers to ask_operator prompts, in order, or a sim_click: mapping "
+                        "(a scripted operator clicking the true part in the sim) (default: ask on the terminal)")
 
     sv = sub.add_parser("serve", help="run the executive as a service: HTTP + WebSocket API, requests as they arrive")
     sv.add_argument("mission", type=Path)
