@@ -18,7 +18,8 @@ Two sources per trial, as for navigation (:mod:`.navtruth` when present):
   barycentre).
 
 :func:`summarize_fruit` folds the trials into the summary (``summary.json`` key
-``fruit``) and :func:`fruit_report_lines` into report.md. None when no trial has fruit.
+``fruit``) and :func:`fruit_report_lines` into report.md. None when no trial has fruit, or
+no trial looked for or moved one (a plant in another mission's world).
 """
 
 from __future__ import annotations
