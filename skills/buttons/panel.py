@@ -62,7 +62,13 @@ from mmexec.skills.manipulation.arm import (
 from mmexec.skills.navigation import find_standoff, simplify_path
 from mmexec.skills.navigation.navigate import costmap, drive_path, nav_settings, rotate_by
 from mmexec.skills.perception import observe_markers
-from mmexec.skills.perception.detect import camera_settings, detector, emit_estimate, look
+from mmexec.skills.perception.detect import (
+    camera_settings,
+    detector,
+    emit_estimate,
+    look,
+    next_frame,
+)
 from mmexec.skills.perception.panel import PanelFit, PanelFitError, fit_panel, press_path
 from mmexec.skills.poses import arm_joints, base_pose, pose_list
 from mmexec.skills.primitives import brake
@@ -440,10 +446,7 @@ def _locate(ctx: SkillContext, frames: int | None) -> SkillGen:
         yield from _settle(ctx, SETTLE)
         got = 0
         while got < n:
-            frame = cam.frame()
-            if frame is None:
-                yield
-                continue
+            frame = yield from next_frame(ctx, cam)
             got += 1
             for ob in observe_markers(frame, det):
                 if ob.id in lay.markers:
@@ -492,14 +495,8 @@ def _light(ctx: SkillContext, centre: np.ndarray, radius: float, contrast: float
     cam = ctx.robot.camera
     assert cam is not None
     yield from _settle(ctx, SETTLE)
-    deadline = ctx.clock.now() + 2.0
-    while True:
-        frame = cam.frame()
-        if frame is not None:
-            return read_light(frame, centre, radius, contrast)
-        if ctx.clock.now() > deadline:
-            raise SkillFailure(FailureKind.EXECUTION, "camera gave no frame for 2 s")
-        yield
+    frame = yield from next_frame(ctx, cam)
+    return read_light(frame, centre, radius, contrast)
 
 
 @skill(

@@ -86,6 +86,7 @@ from mmexec.skills.navigation.navigate import (
     rotate_by,
 )
 from mmexec.skills.operator import ask_operator
+from mmexec.skills.perception.detect import next_frame
 from mmexec.skills.perception.detector import Detection, ObjectDetector
 from mmexec.skills.perception.grasp_point import (
     GraspPoint,
@@ -212,15 +213,9 @@ def look_for(ctx: SkillContext, item: CatalogueItem, frames: int) -> Generator[N
     min_conf = fetch_object_settings(ctx).detector.min_confidence
     best: tuple[Detection, GraspPoint, CameraFrame] | None = None
     centres: list[np.ndarray] = []
-    got, deadline = 0, ctx.clock.now() + FRAME_TIMEOUT
+    got = 0
     while got < frames:
-        frame = cam.frame()
-        if frame is None:
-            if ctx.clock.now() > deadline:
-                raise SkillFailure(FailureKind.EXECUTION, f"camera gave no frame for {FRAME_TIMEOUT:g} s")
-            yield
-            continue
-        deadline = ctx.clock.now() + FRAME_TIMEOUT
+        frame = yield from next_frame(ctx, cam, FRAME_TIMEOUT)
         got += 1
         hits = [d for d in det.detect(frame.rgb) if d.label == item.detector_class and d.confidence >= min_conf]
         for d in hits:

@@ -72,7 +72,7 @@ from mmexec.skills.manipulation.arm import (
     workspace,
 )
 from mmexec.skills.manipulation.candidates import CandidateConfig, grasp_candidates, select_grasp
-from mmexec.skills.perception.detect import markers
+from mmexec.skills.perception.detect import markers, next_frame
 from mmexec.skills.perception.detector import ColourBlobDetector, ObjectDetector
 from mmexec.skills.perception.priority import choose_target
 from mmexec.skills.poses import arm_joints
@@ -157,13 +157,8 @@ def _frames(ctx: SkillContext, n: int) -> SkillGen:
     if cam is None:
         raise SkillFailure(FailureKind.PRECONDITION, "the robot has no camera")
     out = []
-    deadline = ctx.clock.now() + FRAME_TIMEOUT
     while len(out) < n:
-        f = cam.frame()
-        if f is not None:
-            out.append(f)
-        elif ctx.clock.now() > deadline:
-            raise SkillFailure(FailureKind.EXECUTION, f"no camera frame for {FRAME_TIMEOUT:g} s")
+        out.append((yield from next_frame(ctx, cam, FRAME_TIMEOUT)))
         yield
     return out
 

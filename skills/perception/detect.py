@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from mmexec.drivers.interfaces import CameraFrame
+from mmexec.drivers.interfaces import Camera, CameraFrame
 from mmexec.skills.base import (
     FailureKind,
     Output,
@@ -132,6 +132,21 @@ def depth_oriented(ob: MarkerObservation, frame: CameraFrame) -> np.ndarray:
     return np.asarray(frame.T_map_base) @ np.asarray(frame.T_base_camera) @ T_cm
 
 
+def next_frame(ctx: SkillContext, camera: Camera, timeout: float = FRAME_TIMEOUT) -> Generator[None, None, CameraFrame]:
+    """The camera's newest frame: at once when it has one, else yielding a tick at a time;
+    SkillFailure EXECUTION when none comes within ``timeout`` clock seconds [s]. Every
+    skill that waits for a frame waits through this (a camera that stops must not hang
+    a skill)."""
+    deadline = ctx.clock.now() + timeout
+    while True:
+        frame = camera.frame()
+        if frame is not None:
+            return frame
+        if ctx.clock.now() > deadline:
+            raise SkillFailure(FailureKind.EXECUTION, f"camera gave no frame for {timeout:g} s")
+        yield
+
+
 def look(ctx: SkillContext, marker: int, frames: int, *, record_all: bool = True) -> Generator[None, None, MarkerEstimate | None]:
     """Capture up to ``frames`` frames (one per tick) and average the poses of ``marker``.
 
@@ -147,15 +162,8 @@ def look(ctx: SkillContext, marker: int, frames: int, *, record_all: bool = True
     others: dict[int, Any] = {}
     closest = np.inf
     got = 0
-    deadline = ctx.clock.now() + FRAME_TIMEOUT
     while got < frames:
-        frame = cam.frame()
-        if frame is None:
-            if ctx.clock.now() > deadline:
-                raise SkillFailure(FailureKind.EXECUTION, f"camera gave no frame for {FRAME_TIMEOUT:g} s")
-            yield
-            continue
-        deadline = ctx.clock.now() + FRAME_TIMEOUT
+        frame = yield from next_frame(ctx, cam)
         got += 1
         seen = False
         for ob in observe_markers(frame, det):

@@ -118,3 +118,16 @@ def test_too_few_markers_seen_fails_the_fit(ctx, robot):
     run = run_skill(ctx, "locate_panel")
     assert run.failure is not None and run.failure.kind is FailureKind.EXECUTION
     assert "2 of its markers seen" in run.failure.reason
+
+
+def test_a_camera_that_goes_silent_fails_the_look_instead_of_hanging(ctx, robot, monkeypatch):
+    """locate_panel waited for its frames with no deadline: a camera that stopped hung the
+    skill (and the mission) for good. Now every frame wait has the 2 s deadline of
+    perception.detect.next_frame."""
+    T, _ = _rig(ctx, robot)
+    monkeypatch.setattr(robot.camera, "frame", lambda: None)
+    ctx.world[WORLD_PANEL] = PanelEstimate(T, "locator")
+    run = run_skill(ctx, "locate_panel", max_ticks=2000)  # 100 s of clock at 20 Hz: far past the deadline
+    assert run.status is SkillStatus.FAILURE
+    assert run.failure is not None and run.failure.kind is FailureKind.EXECUTION
+    assert "camera gave no frame for 2 s" in run.failure.reason
