@@ -87,7 +87,8 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
                 current = None
 
     total = len(order)
-    n_req = start.get("requests", total) if start else total
+    # a served run (``mmexec serve``) has no fixed number of requests: its run_start says 0
+    n_req = _int(start.get("requests"), total) if start else total
     lines.append("")
     reasons: Counter[str] = Counter()
     outcomes: Counter[str] = Counter()
@@ -97,7 +98,7 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
         end_rec = info["end"]
         req = _fmt_request(info["start"].get("request"))
         if end_rec is None:
-            lines.append(f"request {idx}/{n_req} ({req}): unfinished (log ends mid-request)")
+            lines.append(f"request {_of(idx, n_req)} ({req}): unfinished (log ends mid-request)")
             outcomes["unfinished"] += 1
             continue
         outcome = str(end_rec.get("outcome", "?"))
@@ -105,7 +106,7 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
         duration = _finite(end_rec.get("duration"))
         if duration is not None:
             durations.append(duration)
-        head = f"request {idx}/{n_req} ({req}): {outcome} after {_dur(end_rec.get('duration'))}"
+        head = f"request {_of(idx, n_req)} ({req}): {outcome} after {_dur(end_rec.get('duration'))}"
         n_rec = len(info["recoveries"])
         head += f", {n_rec} recover{'y' if n_rec == 1 else 'ies'}" if n_rec else ""
         lines.append(head)
@@ -128,7 +129,7 @@ def summary(records: Sequence[dict[str, Any]]) -> str:
     lines.append("")
     ok = outcomes.get("success", 0)
     parts = ", ".join(f"{v} {k}" for k, v in sorted(outcomes.items()))
-    lines.append(f"requests: {total} served of {n_req}, {ok} succeeded ({parts or 'none'})")
+    lines.append(f"requests: {total} served{f' of {n_req}' if n_req else ''}, {ok} succeeded ({parts or 'none'})")
     if durations:
         lines.append(f"duration: total {sum(durations):.1f} s, mean {sum(durations) / len(durations):.1f} s, "
                      f"max {max(durations):.1f} s (clock)")
@@ -192,6 +193,12 @@ def replay_frames(records: Sequence[dict[str, Any]], request: int | None = None)
     return _frames(records, request)
 
 
+def _of(index: int, total: int | None) -> str:
+    """``"3/10"`` for request 3 of a run with 10; ``"3"`` when the run had no fixed total
+    (a served run's requests arrive one by one: its records say 0 or None)."""
+    return f"{index}/{total}" if total else str(index)
+
+
 def _frames(records: Sequence[dict[str, Any]], request: int | None) -> Iterator[Frame]:
     frame: Frame | None = None
     nodes: list[str] = []
@@ -236,7 +243,7 @@ def _frames(records: Sequence[dict[str, Any]], request: int | None) -> Iterator[
 def render_frame(frame: Frame) -> str:
     """Text of one frame: a header and the tree, indented by path depth, with py_trees'
     status symbols; nodes that changed at this instant are marked with ``<<``."""
-    lines = [f"── request {frame.index}/{frame.of}  t = {frame.t:.2f} s ──"]
+    lines = [f"── request {_of(frame.index, frame.of)}  t = {frame.t:.2f} s ──"]
     base = min((p.count("/") for p in frame.nodes), default=0)
     for p in frame.nodes:
         st = frame.status.get(p, "INVALID")

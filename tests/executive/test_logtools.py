@@ -126,6 +126,23 @@ def test_records_with_odd_values_replay_and_summarise() -> None:
     assert "mission reload at 2.0 s: rejected: " in text
 
 
+def test_a_served_log_numbers_requests_without_a_total() -> None:
+    """``mmexec serve`` takes requests one by one: its run_start says ``requests: 0`` and
+    each request_start ``of: 0``; the summary and the replay say "request 2", not "2/0"."""
+    records = [{"event": "run_start", "seq": 0, "requests": 0}]
+    records += [r for i in range(2) for r in request_log(i + 1, 0, t0=10.0 * i)]
+    text = summary(records)
+    assert "request 2 (item=2): success after" in text, text
+    assert "/0" not in text
+    assert "requests: 2 served, 2 succeeded" in text, text
+    frames = list(replay_frames(records, request=2))
+    assert render_frame(frames[0]).startswith("── request 2  t = 10.00 s ──")
+    # a run with a fixed number of requests keeps "k/n"
+    fixed = [{"event": "run_start", "seq": 0, "requests": 2}] + records[1:]
+    assert "request 2/2 (" in summary(fixed)
+    assert "requests: 2 served of 2, 2 succeeded" in summary(fixed)
+
+
 def test_cli_request_beyond_the_log_exits_2_in_one_line(run_cli, tmp_path: Path) -> None:
     log = tmp_path / "two.jsonl"
     log.write_text("".join(json.dumps(r) + "\n" for r in request_log(1, 2) + request_log(2, 2, t0=10.0)))
