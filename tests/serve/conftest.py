@@ -114,6 +114,23 @@ class Live:
         return [r for r in recs if event is None or r["event"] == event]
 
 
+def _stream_until(ws: Any, until: Callable[[dict[str, Any]], bool], limit: int = 5000) -> list[dict[str, Any]]:
+    out = []
+    for _ in range(limit):
+        msg = ws.receive_json()
+        out.append(msg)
+        if until(msg):
+            return out
+    raise AssertionError("the stream never sent the expected message")
+
+
+@pytest.fixture
+def stream_until() -> Callable[..., list[dict[str, Any]]]:
+    """``stream_until(ws, pred)``: the /api/stream messages read until (and with) the first
+    one ``pred`` accepts; fails after 5000 messages without it."""
+    return _stream_until
+
+
 @pytest.fixture
 def missions() -> Path:
     """The folder of the service tests' missions."""

@@ -252,24 +252,14 @@ def test_settings_are_checked_at_load(missions: Path, serve_config: Any) -> None
     assert str(config) in text
 
 
-def _messages(ws: Any, until: Any, limit: int = 5000) -> list[dict[str, Any]]:
-    out = []
-    for _ in range(limit):
-        msg = ws.receive_json()
-        out.append(msg)
-        if until(msg):
-            return out
-    raise AssertionError("the stream never sent the expected message")
-
-
-def test_stream_events_tree_status_pose_and_scan(live: Any) -> None:
+def test_stream_events_tree_status_pose_and_scan(live: Any, stream_until: Any) -> None:
     svc = live()
     c = svc.client
     with c.websocket_connect("/api/stream") as ws:
         hello = ws.receive_json()
         assert hello["type"] == "hello" and hello["data"]["topics"] == list(TOPICS)
         rid = c.post("/api/requests", json={"item": 5}).json()["id"]
-        msgs = _messages(ws, lambda m: m["type"] == "event" and m["data"]["event"] == "request_end")
+        msgs = stream_until(ws, lambda m: m["type"] == "event" and m["data"]["event"] == "request_end")
     kinds = {m["type"] for m in msgs}
     assert {"event", "tree", "status"} <= kinds
     events = [m["data"] for m in msgs if m["type"] == "event"]
@@ -289,7 +279,7 @@ def test_stream_events_tree_status_pose_and_scan(live: Any) -> None:
         ws.receive_json()
         svc.runner.add_tick_hook(lambda robot, period: robot.lidar.scan())  # as a skill reading the lidar
         c.post("/api/requests", json={"item": 6})
-        got = _messages(ws, lambda m: m["type"] == "scan")
+        got = stream_until(ws, lambda m: m["type"] == "scan")
     pose = next(m for m in got if m["type"] == "pose")["data"]
     assert {"x", "y", "theta", "v", "w", "t"} <= set(pose)
     scan = next(m for m in got if m["type"] == "scan")["data"]
@@ -297,7 +287,7 @@ def test_stream_events_tree_status_pose_and_scan(live: Any) -> None:
     assert {m["type"] for m in got} <= {"pose", "scan"}
 
 
-def test_camera_stream_shows_what_the_skills_read(live: Any, serve_config: Any) -> None:
+def test_camera_stream_shows_what_the_skills_read(live: Any, serve_config: Any, stream_until: Any) -> None:
     """On a stepped clock the stream never reads a sensor itself: the mock camera's 2nd
     read drops out whether or not a client watches, so request 2's prompt fails."""
     config = serve_config("")
@@ -309,7 +299,7 @@ def test_camera_stream_shows_what_the_skills_read(live: Any, serve_config: Any) 
     with c.websocket_connect("/api/stream?topics=camera,prompt") as ws:
         ws.receive_json()
         first = c.post("/api/requests", json={"item": 1}).json()["id"]
-        got = _messages(ws, lambda m: m["type"] == "camera")
+        got = stream_until(ws, lambda m: m["type"] == "camera")
         prompt = next(m for m in got if m["type"] == "prompt")["data"]
         cam = next(m for m in got if m["type"] == "camera")["data"]
         assert base64.b64decode(cam["jpeg"])[:2] == b"\xff\xd8" and (cam["width"], cam["height"]) == (64, 48)
@@ -332,14 +322,14 @@ def test_stream_unknown_topic(live: Any) -> None:
             ws.receive_json()
 
 
-def test_a_client_joining_mid_request_gets_the_tree(live: Any) -> None:
+def test_a_client_joining_mid_request_gets_the_tree(live: Any, stream_until: Any) -> None:
     svc = live("ask_confirm")
     c = svc.client
     rid = c.post("/api/requests", json={"item": 1}).json()["id"]
     svc.prompt()
     with c.websocket_connect("/api/stream?topics=tree,status") as ws:
         assert ws.receive_json()["type"] == "hello"
-        tree = _messages(ws, lambda m: m["type"] == "tree")[-1]["data"]
+        tree = stream_until(ws, lambda m: m["type"] == "tree")[-1]["data"]
     assert tree["request"] == rid
     status = {n["path"]: n["status"] for n in tree["nodes"]}
     assert status["ask_confirm/confirm"] == "RUNNING" and status["ask_confirm/report"] == "INVALID"

@@ -34,17 +34,6 @@ from mmexec.executive.serve.settings import ServeSettings
 from mmexec.skills.perception.detect import WORLD_DETECTOR, WORLD_MARKERS, MarkerEstimate
 from mmexec.skills.perception.markers import DetectorConfig, MarkerDetector
 
-
-def _messages(ws: Any, until: Any, limit: int = 5000) -> list[dict[str, Any]]:
-    out = []
-    for _ in range(limit):
-        msg = ws.receive_json()
-        out.append(msg)
-        if until(msg):
-            return out
-    raise AssertionError("the stream never sent the expected message")
-
-
 # --------------------------------------------------------------------------- static files
 
 
@@ -191,7 +180,7 @@ def test_mission_before_one_is_loaded_is_409() -> None:
 # --------------------------------------------------------------------------- streams
 
 
-def test_blackboard_markers_people_and_robot_facts(live: Any) -> None:
+def test_blackboard_markers_people_and_robot_facts(live: Any, stream_until: Any) -> None:
     svc = live("ask_confirm")
     c = svc.client
     world = svc.runner.world
@@ -217,9 +206,9 @@ def test_blackboard_markers_people_and_robot_facts(live: Any) -> None:
                 wanted.discard(m["type"])
             return not wanted
 
-        got = _messages(ws, seen_all)
+        got = stream_until(ws, seen_all)
         c.post(f"/api/prompts/{prompt['id']}/answer", json={"answer": True})
-        final = _messages(ws, lambda m: m["type"] == "blackboard" and "confirmed" in m["data"]["values"])[-1]
+        final = stream_until(ws, lambda m: m["type"] == "blackboard" and "confirmed" in m["data"]["values"])[-1]
     assert svc.finished(rid)["state"] == "success"
     assert final["data"]["values"]["confirmed"] is True and final["data"]["values"]["who"] == "api"
     markers = next(m for m in got if m["type"] == "markers")["data"]["markers"]
@@ -237,20 +226,20 @@ def test_blackboard_markers_people_and_robot_facts(live: Any) -> None:
     assert kinds == {"blackboard", "markers"}
 
 
-def test_a_scan_comes_with_the_base_pose_and_the_lidar_mount(live: Any) -> None:
+def test_a_scan_comes_with_the_base_pose_and_the_lidar_mount(live: Any, stream_until: Any) -> None:
     svc = live()
     c = svc.client
     svc.runner.add_tick_hook(lambda robot, period: robot.lidar.scan())  # as a skill reading the lidar
     with c.websocket_connect("/api/stream?topics=scan") as ws:  # no pose subscriber: the scan still has it
         assert ws.receive_json()["type"] == "hello"
         c.post("/api/requests", json={"item": 1})
-        scan = _messages(ws, lambda m: m["type"] == "scan")[-1]["data"]
+        scan = stream_until(ws, lambda m: m["type"] == "scan")[-1]["data"]
     mount = svc.runner.robot.lidar.scan().T_base_lidar
     assert scan["lidar"] == pytest.approx([mount[0, 3], mount[1, 3], math.atan2(mount[1, 0], mount[0, 0])])
     assert len(scan["pose"]) == 3 and all(math.isfinite(v) for v in scan["pose"])
 
 
-def test_a_camera_frame_comes_with_its_detections(live: Any) -> None:
+def test_a_camera_frame_comes_with_its_detections(live: Any, stream_until: Any) -> None:
     svc = live("ask_point")
     c = svc.client
     world = svc.runner.world
@@ -259,7 +248,7 @@ def test_a_camera_frame_comes_with_its_detections(live: Any) -> None:
     with c.websocket_connect("/api/stream?topics=camera,prompt") as ws:
         assert ws.receive_json()["type"] == "hello"
         c.post("/api/requests", json={"item": 1})
-        cam = _messages(ws, lambda m: m["type"] == "camera")[-1]["data"]
+        cam = stream_until(ws, lambda m: m["type"] == "camera")[-1]["data"]
         prompt = svc.prompt()
         c.post(f"/api/prompts/{prompt['id']}/answer", json={"answer": [1, 1]})
     assert cam["detections"] == []  # the mock's image shows no marker
