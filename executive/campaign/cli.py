@@ -41,7 +41,8 @@ def add_campaign_parser(sub: Any) -> None:
     c.add_argument("--requests", type=Path, metavar="FILE", help="YAML list of fixed requests")
     c.add_argument("--draw", action="append", default=[], metavar="FIELD=V1,V2|@markers|@objects",
                    help="draw a request field per trial from these values (@markers: the sim world's items' "
-                        "marker ids; @objects: its untagged objects' names)")
+                        "marker ids; @objects: its untagged objects' names); commas inside brackets stay in "
+                        "a value, so a list field draws whole lists: buttons=[b1,b2],[b3]")
     c.add_argument("--requests-per-trial", type=int, default=1, metavar="R", help="drawn requests per trial")
     c.add_argument("--param", action="append", default=[], metavar="K=V", help="override a mission parameter")
     c.add_argument("--request-timeout", type=float, metavar="S", help="clock seconds per request (mmexec run)")

@@ -76,10 +76,33 @@ def world_objects(cfg: Mapping[str, Any], mark: Mark) -> tuple[str, ...]:
     return out
 
 
+def split_values(text: str) -> list[str]:
+    """``"1,2,3"`` -> ``["1", "2", "3"]``, keeping commas inside brackets and braces, so a
+    list or mapping field can be drawn: ``"[0, 1],[2]"`` -> ``["[0, 1]", "[2]"]``.
+    ValueError for unbalanced brackets."""
+    parts: list[str] = []
+    depth, start = 0, 0
+    for i, ch in enumerate(text):
+        if ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+            if depth < 0:
+                raise ValueError(f"unbalanced {ch!r} at character {i + 1} of {text!r}")
+        elif ch == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    if depth:
+        raise ValueError(f"unclosed bracket in {text!r}")
+    parts.append(text[start:])
+    return parts
+
+
 def parse_draws(tokens: Sequence[str], cfg: Mapping[str, Any]) -> dict[str, tuple[Any, ...]]:
     draws: dict[str, tuple[Any, ...]] = {}
     problems: list[Problem] = []
     for i, tok in enumerate(tokens, start=1):
+        # values split at top-level commas: FIELD=1,2,3 or, for a list field, FIELD=[0,1],[2]
         mark = ArgMark("--draw", i, 1)
         key, sep, value = tok.partition("=")
         key = key.strip()
@@ -95,7 +118,11 @@ def parse_draws(tokens: Sequence[str], cfg: Mapping[str, Any]) -> dict[str, tupl
             except InputError as e:
                 problems.extend(e.problems)
             continue
-        values = tuple(v.strip() for v in value.split(",") if v.strip())
+        try:
+            values = tuple(v.strip() for v in split_values(value) if v.strip())
+        except ValueError as e:
+            problems.append(Problem(mark, f"{key}: {e}"))
+            continue
         if not values:
             problems.append(Problem(mark, f"no values to draw {key!r} from"))
             continue

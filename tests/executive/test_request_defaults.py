@@ -12,6 +12,7 @@ from fastapi.testclient import TestClient
 
 from mmexec.config.yamlload import InputError
 from mmexec.executive.campaign import CampaignOptions, RequestPlan, run_campaign
+from mmexec.executive.campaign.requests import parse_draws, split_values
 from mmexec.executive.cli import _cli_requests
 from mmexec.executive.compiler import load_mission
 from mmexec.executive.config import load_skill_modules
@@ -174,6 +175,25 @@ def test_campaign_draws_some_fields_and_the_rest_take_their_defaults(tmp_path: P
     assert "--request who=ann" in results[0].command and "times=" not in results[0].command
     log = Path(results[0].log)
     assert [r["message"] for r in read_log(log) if r["event"] == "report"] == ["ann x2 ['a', 'b']"]
+
+
+def test_a_list_field_can_be_drawn_its_commas_kept_inside_brackets(tmp_path: Path) -> None:
+    assert split_values("1,2,3") == ["1", "2", "3"]
+    assert split_values("[b1, b2],[b3],{k: [1, 2]}") == ["[b1, b2]", "[b3]", "{k: [1, 2]}"]
+    draws = parse_draws(["who=ann,bo", "tags=[x, y],[z]"], {"backend": "mock"})
+    assert draws == {"who": ("ann", "bo"), "tags": ("[x, y]", "[z]")}
+    for bad, why in (("tags=[x,y", "tags: unclosed bracket in '[x,y'"),
+                     ("tags=x],[y", "tags: unbalanced ']' at character 2 of 'x],[y'")):
+        with pytest.raises(InputError) as ei:
+            parse_draws([bad], {"backend": "mock"})
+        assert str(ei.value) == f"--draw #1: {why}", str(ei.value)
+    # each trial gets one whole list, typed by the mission's request field
+    m, c = write(tmp_path, MISSION), write(tmp_path, CONFIG, "c.yaml")
+    opts = CampaignOptions(mission=m, config=c, trials=2, out=tmp_path / "lists", workers=1, progress=False,
+                           requests=RequestPlan(draws=parse_draws(["who=ann", "tags=[x, y],[z]"], {})))
+    _, results = run_campaign(opts, out=io.StringIO())
+    said = sorted(r["message"] for res in results for r in read_log(Path(res.log)) if r["event"] == "report")
+    assert set(said) <= {"ann x2 ['x', 'y']", "ann x2 ['z']"} and len(said) == 2, said
 
 
 def test_a_request_field_given_as_a_parameter_says_so(tmp_path: Path) -> None:
