@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from mmexec.config.yamlload import InputError
+from mmexec.drivers.geometry import planar_transform
 from mmexec.drivers.interfaces import CameraFrame, Pose2D
 from mmexec.skills.base import (
     FailureKind,
@@ -76,6 +77,7 @@ from mmexec.skills.manipulation.arm import (
     with_arm_status,
     workspace,
 )
+from mmexec.skills.manipulation.holistic_skill import holistic_seed
 from mmexec.skills.navigation import find_standoff, simplify_path
 from mmexec.skills.navigation.navigate import (
     back_off,
@@ -447,21 +449,67 @@ def approach_object(ctx: SkillContext, distance_index: int = 0, timeout: float |
 )
 def locate_object(ctx: SkillContext, frames: int | None = None) -> SkillGen:
     """Look at the found object again from where the robot stands (the stand-off), the arm
-    first in ``fetch_object.locate_pose`` when given (a wrist camera pointed down): the
-    pick plans from this closest view. When the object is not in view from there, the
-    pick uses the estimate it was found with (logged)."""
+    first in ``fetch_object.locate_pose`` when given (a wrist camera pointed down), a
+    pan/tilt head aimed at the object's estimate (so the object lies in the middle of the
+    image, not cut by its edge; the head goes home afterwards, or for a dangerous item
+    after ``mark_dangerous`` showed the operator this view): the pick plans from this
+    closest view, ``frames`` predictions fused. EXECUTION "ITEM not seen from the
+    stand-off" when the view shows no such object (the pick would close on nothing where
+    the far estimate was off)."""
     t = _target(ctx, "locate_object")
     prof = fetch_object_settings(ctx)
     if prof.locate_pose is not None and ctx.robot.arm is not None:
         yield from move_named(ctx, prof.locate_pose)
-    yield from _settle(ctx, prof.settle_time)
-    near = yield from look_for(ctx, t.item, frames or prof.frames)
+    head = ctx.robot.head
+    aimed = yield from _aim_head(ctx, t.centre)
+    try:
+        yield from _settle(ctx, prof.settle_time)
+        near = yield from look_for(ctx, t.item, frames or prof.frames)
+    except BaseException:
+        if aimed and head is not None:
+            head.point(*head.home)  # back home, not waited for (failed or cancelled)
+        raise
+    if aimed and head is not None and (near is None or not t.item.dangerous):
+        yield from wait_goal(ctx, head.point(*head.home), timeout=10.0)
     if near is None:
-        log.warning("%s not in view from its stand-off; the pick uses the estimate from %.2f m", t.item.name, t.distance)
-        ctx.emit("object_not_relocated", item=t.item.name, distance=round(t.distance, 3), node=ctx.node_path)
-        return {"centre": [float(v) for v in t.centre]}
+        ctx.emit("object_not_relocated", item=t.item.name, distance=round(t.distance, 3), aimed=aimed,
+                 node=ctx.node_path)
+        raise SkillFailure(FailureKind.EXECUTION,
+                           f"{t.item.name} not seen from the stand-off (the head {'aimed at' if aimed else 'facing'} "
+                           f"its estimate {', '.join(f'{v:.2f}' for v in t.centre)} m)")
     _record(ctx, near, "stand-off")
     return {"centre": [float(v) for v in near.centre]}
+
+
+def _head_home(ctx: SkillContext, wait: bool) -> Generator[None, None, None]:
+    """A pan/tilt head off its home pose back home (``wait``: until it is there)."""
+    head = ctx.robot.head
+    if head is None:
+        return
+    st, home = head.state(), head.home
+    if max(abs(st.pan - home[0]), abs(st.tilt - home[1])) <= head.tolerance:
+        return
+    goal = head.point(*home)
+    if wait:
+        yield from wait_goal(ctx, goal, timeout=10.0)
+
+
+def _aim_head(ctx: SkillContext, centre: np.ndarray) -> Generator[None, None, bool]:
+    """Point a pan/tilt head (one with a kinematic model) at ``centre`` (map [m]); True
+    when it moved there, False without such a head or when the point is outside its
+    limits (logged: the look goes on from the head's current pose)."""
+    head, base = ctx.robot.head, ctx.robot.base
+    if head is None or head.kinematics is None or base is None:
+        return False
+    p = base.state().pose
+    T_base_map = np.linalg.inv(planar_transform(p.x, p.y, p.theta))
+    in_base = (T_base_map @ np.array([*(float(v) for v in centre[:3]), 1.0]))[:3]
+    try:
+        yield from wait_goal(ctx, head.look_at(in_base), timeout=10.0)
+    except SkillFailure as e:
+        log.info("head not aimed at the object: %s", e.reason)
+        return False
+    return True
 
 
 # --------------------------------------------------------------------------- dangerous items
@@ -482,6 +530,16 @@ def mark_dangerous(ctx: SkillContext, timeout: float | None = None) -> SkillGen:
     t = _target(ctx, "mark_dangerous")
     if not t.item.dangerous:
         return {"asked": False}
+    try:
+        out = yield from _mark(ctx, t, timeout)
+    except BaseException:
+        yield from _head_home(ctx, wait=False)  # failed or cancelled: not waited for
+        raise
+    yield from _head_home(ctx, wait=True)  # locate_object left it on the object for this view
+    return out
+
+
+def _mark(ctx: SkillContext, t: ObjectTarget, timeout: float | None) -> SkillGen:
     limit = timeout if timeout is not None else fetch_object_settings(ctx).operator_timeout
     x, y, w, h = t.detection.box
     u, v = t.grasp.pixel
@@ -580,6 +638,9 @@ def _pick_steps(ctx: SkillContext, t: ObjectTarget, algorithm: str | None, time_
     poses = grasp_poses(T_am @ _grasp_frame(t, mode), ws.kin.approach_axis, pre_grasp=gs.pre_grasp,
                         retract=gs.retract, grasp_height=gs.grasp_height, grasp_depth=gs.depth)
     q, seeds, boxes = measured_joints(ctx), ik_seeds(ctx, ws, poses.pre_grasp), ctx.robot.scene
+    first = holistic_seed(ctx)  # after a holistic stand-off: its arm solution's family first
+    if first is not None:
+        seeds = [first, *seeds]
     ctx.emit("object_grasp", item=t.item.name, mode=mode, centre=[round(float(v), 4) for v in t.grasp.centre],
              width=round(t.grasp.top_width if mode == "top" else t.grasp.front_width, 4), node=ctx.node_path)
 

@@ -74,6 +74,7 @@ from mmexec.skills.manipulation.planner import (
     ompl_setup,
     ompl_solve,
     ompl_state,
+    time_parametrize,
 )
 from mmexec.skills.manipulation.scene import ArmModel, PlanningScene
 from mmexec.skills.navigation.grid import CostMap
@@ -92,6 +93,16 @@ log = logging.getLogger(__name__)
 
 #: Names of the three virtual joints (the paper's prismatic x, prismatic y, revolute z).
 BASE_JOINTS = ("base_x", "base_y", "base_yaw")
+
+#: [rad] largest joint move of :func:`replan_arm`'s escape from a start posture in
+#: collision to the drive posture (a few mrad of tracking error on a stow posture that
+#: nearly touches the robot itself, e.g. the LoCoBot's fingers by its arm base).
+ESCAPE_LIMIT = 0.06
+
+#: [m] waypoint spacing and [rad] largest joint step of the straight pre-grasp -> grasp
+#: line a goal must allow (the arm planner's ``cartesian_path`` defaults, which the pick uses)
+APPROACH_STEP = 0.01
+APPROACH_JOINT_STEP = 0.25
 
 #: Candidate base poses solved per IK batch (nearest first); goal sampling stops at the
 #: first chunk after which ``goal_count`` goals are found.
@@ -115,7 +126,13 @@ class HolisticConfig:
     largest joint change from the pre-grasp to the grasp's IK (when a grasp is given);
     ``tolerance`` [m, rad]: a goal's base pose shifted this much (x, y and yaw, four
     ways) must still reach the pre-grasp, as navigation stops near, not at, the pose
-    ((0, 0): not checked); ``seed`` for the goal sampler and OMPL (deterministic for a given query sequence)."""
+    ((0, 0): not checked); ``drive_margin`` [m, rad]: the arm's drive posture must be
+    free with the base anywhere within this of a goal's base pose (checked on the ring
+    of 8 directions at that distance, each at the heading and turned by +-the angle,
+    and turned on the spot): the base drives there with the arm stowed and stops off
+    the pose by up to navigation's goal and heading tolerances plus the localiser's
+    error, and an arm whose start posture is in collision cannot move at all ((0, 0):
+    the exact pose only); ``seed`` for the goal sampler and OMPL (deterministic for a given query sequence)."""
 
     algorithm: str = "rrtconnect"
     time_limit: float = 1.0
@@ -129,6 +146,7 @@ class HolisticConfig:
     min_reach: float = 0.12
     max_grasp_jump: float = 1.0
     tolerance: tuple[float, float] = (0.03, 0.03)
+    drive_margin: tuple[float, float] = (0.06, 0.06)
     seed: int | None = 0
 
     def validate(self) -> list[str]:
@@ -143,8 +161,9 @@ class HolisticConfig:
                 errs.append(f"{name}: must be >= 1, got {getattr(self, name)}")
         if not 0 <= self.yaw_spread <= math.pi:
             errs.append(f"yaw_spread: must be in [0, pi] rad, got {self.yaw_spread}")
-        if not self.min_reach >= 0 or not self.range >= 0 or not min(self.tolerance) >= 0:
-            errs.append("min_reach, range and tolerance must be >= 0")
+        if not self.min_reach >= 0 or not self.range >= 0 or not min(self.tolerance) >= 0 \
+                or not min(self.drive_margin) >= 0:
+            errs.append("min_reach, range, tolerance and drive_margin must be >= 0")
         return errs
 
 
@@ -447,7 +466,6 @@ class HolisticPlanner:
                 cfg: HolisticConfig, wanted: int) -> list[tuple[float, ...]]:
         """The goal states among the solved candidate ``rows``, in order, at most ``wanted``."""
         m = self.model
-        kin = m.kin
         goals: list[tuple[float, ...]] = []
         for i in rows:
             if self.stop.is_set() or len(goals) >= wanted:
@@ -458,14 +476,35 @@ class HolisticPlanner:
             if T_map_grasp is not None:
                 T_am = np.eye(4)
                 T_am[:3, :3], T_am[:3, 3] = Rt[i], -Rt[i] @ t_ab[i]
-                qg = kin.ik(T_am @ T_map_grasp, q[i], free_approach_rotation=free_rotation, attempts=1,
-                            max_iterations=80)
-                if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump or not m.scene.is_valid(qg):
+                qg = self._approach(T_am @ T_map_pre, T_am @ T_map_grasp, q[i], free_rotation)
+                if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump:
                     continue
             if not self._tolerant(bx, by, byaw, q[i], stow, T_map_pre, free_rotation, cfg):
                 continue
+            if not self.drive_clear(bx, by, byaw, stow, cfg.drive_margin):
+                continue
             goals.append((bx, by, byaw, *(float(v) for v in q[i])))
         return goals
+
+    def _approach(self, T_pre: np.ndarray, T_grasp: np.ndarray, q_pre: np.ndarray,
+                  free_rotation: bool) -> np.ndarray | None:
+        """The straight tool line from the pre-grasp to the grasp (both 4x4 in the arm
+        base frame) as the pick will move it (the arm planner's ``cartesian_path``): IK
+        every :data:`APPROACH_STEP` seeded by the previous waypoint from ``q_pre``, no
+        joint moving more than :data:`APPROACH_JOINT_STEP` between two, each waypoint
+        collision-free in the scene as placed. The grasp's joints, or None."""
+        m = self.model
+        p0, p1 = T_pre[:3, 3], T_grasp[:3, 3]
+        n = max(1, math.ceil(float(np.linalg.norm(p1 - p0)) / APPROACH_STEP))
+        q = q_pre
+        for k in range(1, n + 1):
+            T = T_grasp.copy()
+            T[:3, 3] = p0 + (p1 - p0) * k / n
+            qn = m.kin.ik(T, q, free_approach_rotation=free_rotation, attempts=1, max_iterations=60)
+            if qn is None or float(np.max(np.abs(qn - q))) > APPROACH_JOINT_STEP or not m.scene.is_valid(qn):
+                return None
+            q = qn
+        return q
 
     def _tolerant(self, x: float, y: float, yaw: float, q: np.ndarray, stow: np.ndarray, T_map_pre: np.ndarray,
                   free_rotation: bool, cfg: HolisticConfig) -> bool:
@@ -486,6 +525,20 @@ class HolisticPlanner:
             if qs is None or not m.scene.is_valid(qs):
                 return False
         return True
+
+    def drive_clear(self, x: float, y: float, yaw: float, q_drive: Sequence[float],
+                    margin: tuple[float, float]) -> bool:
+        """The arm's drive posture ``q_drive`` [rad] is collision-free with the base at
+        ``(x, y, yaw)`` (``map``) and anywhere within ``margin`` ([m, rad]) of it: on the
+        ring of 8 directions at that distance, each at the heading and turned by +-the
+        angle, and turned on the spot (:attr:`HolisticConfig.drive_margin`)."""
+        m = self.model
+        d, a = margin
+        shifts = [(0.0, 0.0)]
+        if d > 0:
+            shifts += [(d * math.cos(k * math.pi / 4), d * math.sin(k * math.pi / 4)) for k in range(8)]
+        turns = (0.0, -a, a) if a > 0 else (0.0,)
+        return all(m.arm_valid(x + dx, y + dy, yaw + da, q_drive) for dx, dy in shifts for da in turns)
 
     # ------------------------------------------------------------------ plan
     def bounds(self, start: Pose2D, target: Sequence[float] | None = None,
@@ -577,7 +630,7 @@ class HolisticPlanner:
             acfg = cfg if goals else replace(cfg, goal_candidates=cfg.goal_candidates * min(8, 2 ** attempt))
             tolerant = bool(goals) or attempt < cfg.attempts - 1 or attempt == 0
             if not tolerant:
-                acfg = replace(acfg, tolerance=(0.0, 0.0))
+                acfg = replace(acfg, tolerance=(0.0, 0.0), drive_margin=(0.0, 0.0))
             poses, counts = self._candidates(start, target, lo, hi, rng, acfg)
             new, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, drive, free_approach_rotation,
                                              acfg, rng)
@@ -593,7 +646,9 @@ class HolisticPlanner:
                     continue
                 chain = ", ".join(f"{v} {k}" for k, v in counts.items())
                 what = ("a collision-free IK" + (", the grasp near it" if T_map_grasp is not None else "")
-                        + ", room for the stowed arm" + (" and the navigation tolerance" if tolerant else ""))
+                        + ", room for the stowed arm"
+                        + (f" within {cfg.drive_margin[0]:g} m, {cfg.drive_margin[1]:g} rad of the pose and the "
+                           "navigation tolerance" if tolerant else ""))
                 return fail(f"no base pose within reach of the pre-grasp at ({target[0]:.2f}, {target[1]:.2f}, "
                             f"{target[2]:.2f}): of {chain}, {with_ik} had an IK and none {what}", used)
             start_state = state0
@@ -655,15 +710,38 @@ class HolisticPlanner:
 
 def replan_arm(planner: ArmPlanner, reached: Pose2D, mount: Sequence[float], q_now: Sequence[float],
                T_map_pre: np.ndarray, boxes: Sequence[SceneBox], *, seeds: Sequence[Sequence[float]] = (),
-               free_approach_rotation: bool = False, config: PlannerConfig | None = None) -> PlanResult:
+               free_approach_rotation: bool = False, config: PlannerConfig | None = None,
+               q_escape: Sequence[float] | None = None, escape_limit: float = ESCAPE_LIMIT) -> PlanResult:
     """The arm's part, re-planned from the base pose actually ``reached`` (``map``): the
     static ``boxes`` (``map``) moved into the arm base frame through ``reached`` and the
     arm ``mount`` (``T_base_armbase`` translation [m]), then RRT-Connect (or the
     planner's algorithm) from ``q_now`` to the pre-grasp ``T_map_pre``, IK seeded first by
     ``seeds`` (the holistic plan's arm configuration: the same solution family when the
     base stopped close to where it was planned). The scene's robot must be at home
-    (:meth:`HolisticModel.release`)."""
+    (:meth:`HolisticModel.release`).
+
+    A start in collision (the measured posture a few mrad off a drive posture that nearly
+    touches something) is left by a short escape only when it is safe: ``q_escape`` (the
+    drive posture the arm was sent to) collision-free here and within ``escape_limit``
+    [rad] of ``q_now`` in every joint; the path then starts with that straight move from
+    ``q_now`` (the planner plans from ``q_escape``). Otherwise "start in collision: ..."
+    as the planner says."""
     T_am = np.linalg.inv(armbase_in_map(reached, mount))
     planner.scene.set_static_boxes(boxes, T_am)
-    return planner.plan_to_pose(q_now, T_am @ np.asarray(T_map_pre, dtype=float), ik_seeds=seeds,
-                                free_approach_rotation=free_approach_rotation, config=config)
+    q0 = np.asarray(q_now, dtype=float)
+    start = q0
+    if q_escape is not None and not planner.scene.is_valid(q0):
+        qe = np.asarray(q_escape, dtype=float)
+        if qe.shape == q0.shape and float(np.max(np.abs(qe - q0))) <= escape_limit and planner.scene.is_valid(qe):
+            log.info("holistic: arm start in collision (%s); escaping %.3f rad to the drive posture",
+                     ", ".join(f"{a} vs {b}" for a, b in planner.scene.collisions(q0)[:2]), float(np.max(np.abs(qe - q0))))
+            start = qe
+    res = planner.plan_to_pose(start, T_am @ np.asarray(T_map_pre, dtype=float), ik_seeds=seeds,
+                               free_approach_rotation=free_approach_rotation, config=config)
+    if start is q0 or not res.success:
+        return res
+    cfg = config or planner.config
+    path = [tuple(float(v) for v in q0), *res.path]
+    traj = time_parametrize(planner.kin.joint_names, path, planner.kin.limits, velocity_scale=cfg.velocity_scale,
+                            acceleration_scale=cfg.acceleration_scale, sample_period=cfg.sample_period)
+    return replace(res, path=path, trajectory=traj)

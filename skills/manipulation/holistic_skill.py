@@ -63,16 +63,49 @@ from mmexec.skills.manipulation.holistic import (
     replan_arm,
 )
 from mmexec.skills.manipulation.planner import PlanResult
-from mmexec.skills.navigation.navigate import costmap, drive_path, nav_settings
+from mmexec.skills.navigation.navigate import costmap, drive_path, nav_settings, rotate_by
 from mmexec.skills.poses import arm_joints
 from mmexec.skills.profile import declare_settings, setting
 
-__all__ = ["HolisticSettings", "grasp_frame", "holistic_settings", "holistic_standoff"]
+__all__ = ["WORLD_HOLISTIC_ARM", "HolisticArm", "HolisticSettings", "grasp_frame", "holistic_seed", "holistic_settings",
+           "holistic_standoff"]
 
 log = logging.getLogger(__name__)
 
 #: name of the target object's box in the planning scene while this skill plans
 TARGET_ITEM = "holistic_target"
+#: [rad] steps at which a turn on the spot is checked for the stowed arm
+TURN_STEP = 0.02
+#: world-model key of the last stand-off's arm solution (:class:`HolisticArm`)
+WORLD_HOLISTIC_ARM = "holistic.arm"
+#: ([m], [rad]) a base this close to a :class:`HolisticArm`'s pose still uses its arm solution
+SEED_POSE_TOLERANCE = (0.02, 0.02)
+
+
+@dataclass(frozen=True)
+class HolisticArm:
+    """The arm's pre-grasp joints [rad] ``arm`` that ``holistic_standoff`` re-planned
+    from the base pose ``pose`` (``map``) it reached: the solution family (the holistic
+    goal's) whose straight approach to the grasp was checked, for a pick that follows
+    (:func:`holistic_seed`)."""
+
+    pose: Pose2D
+    arm: tuple[float, ...]
+
+
+def holistic_seed(ctx: SkillContext) -> list[float] | None:
+    """The last holistic stand-off's pre-grasp joints [rad] while the base is still where
+    they were planned from (within :data:`SEED_POSE_TOLERANCE`), else None: a pick seeds
+    its pre-grasp IK with them first, so it stays in the family whose straight approach
+    the planner checked."""
+    h, base = ctx.world.get(WORLD_HOLISTIC_ARM), ctx.robot.base
+    if not isinstance(h, HolisticArm) or base is None:
+        return None
+    p = base.state().pose
+    if math.hypot(p.x - h.pose.x, p.y - h.pose.y) > SEED_POSE_TOLERANCE[0] or \
+            abs(math.remainder(p.theta - h.pose.theta, math.tau)) > SEED_POSE_TOLERANCE[1]:
+        return None
+    return list(h.arm)
 
 
 @dataclass(frozen=True)
@@ -93,6 +126,9 @@ class HolisticSettings:
         "the arm base faces the target within this"))
     tolerance: tuple[float, float] = setting((0.03, 0.03), unit="m, rad", ge=0, doc=(
         "a goal's base pose shifted this much must still reach the pre-grasp (navigation stops near it)"))
+    drive_margin: tuple[float, float] = setting((0.06, 0.06), unit="m, rad", ge=0, doc=(
+        "the stowed arm must be free with the base anywhere this close to a goal's base pose (the drive's "
+        "arrival error: navigation's goal and heading tolerances plus the localiser's error)"))
     pre_grasp: float = setting(0.10, unit="m", ge=0, doc="pre-grasp distance from the grasp point along the approach")
     max_grasp_jump: float = setting(1.0, unit="rad", gt=0, doc=(
         "largest joint change from the pre-grasp to the grasp's IK (a goal needs a short straight approach)"))
@@ -103,7 +139,8 @@ class HolisticSettings:
         return HolisticConfig(algorithm=algorithm or self.algorithm, time_limit=time_limit or self.time_limit,
                               attempts=attempts or self.attempts, box=self.box, goal_count=self.goal_count,
                               goal_candidates=self.goal_candidates, yaw_spread=self.yaw_spread,
-                              tolerance=self.tolerance, max_grasp_jump=self.max_grasp_jump)
+                              tolerance=self.tolerance, drive_margin=self.drive_margin,
+                              max_grasp_jump=self.max_grasp_jump)
 
 
 holistic_settings = declare_settings("holistic", HolisticSettings, package=__name__,
@@ -160,19 +197,52 @@ def _plan_job(ws: ArmWorkspace, model: HolisticModel, planner: HolisticPlanner, 
 
 def _arm_job(ws: ArmWorkspace, reached: Pose2D, mount: Sequence[float], q: list[float], T_pre: np.ndarray,
              boxes: Sequence[Any], item: tuple[tuple[float, float, float], np.ndarray] | None,
-             seeds: list[list[float]]) -> PlanResult:
+             seeds: list[list[float]], stow: list[float]) -> PlanResult:
     """(worker thread) The arm re-planned from the base pose reached, the target's box in
-    the scene meanwhile."""
+    the scene meanwhile; a start a few mrad off the stow posture and in collision escapes
+    to it (:func:`replan_arm`)."""
     scene = ws.scene
     for name in [n for n, it in scene.items.items() if not it.attached]:
         scene.remove_item(name)
     if item is not None:
         scene.add_item(TARGET_ITEM, item[0], np.linalg.inv(armbase_in_map(reached, mount)) @ item[1])
     try:
-        return replan_arm(ws.planner, reached, mount, q, T_pre, boxes, seeds=seeds, config=ws.config())
+        return replan_arm(ws.planner, reached, mount, q, T_pre, boxes, seeds=seeds, config=ws.config(), q_escape=stow)
     finally:
         if TARGET_ITEM in scene.items:
             scene.remove_item(TARGET_ITEM)
+
+
+def _turn_job(model: HolisticModel, boxes: Sequence[Any], item: tuple[tuple[float, float, float], np.ndarray] | None,
+              reached: Pose2D, turn: float, stow: list[float]) -> bool:
+    """(worker thread) Whether the stowed arm stays clear while the base turns on the spot
+    from ``reached`` by ``turn`` [rad] (checked every 0.02 rad, the end included)."""
+    model.prepare(boxes, {TARGET_ITEM: item} if item is not None else None)
+    try:
+        n = max(1, math.ceil(abs(turn) / TURN_STEP))
+        return all(model.arm_valid(reached.x, reached.y, reached.theta + turn * k / n, stow) for k in range(1, n + 1))
+    finally:
+        model.release()
+
+
+def _align(ctx: SkillContext, ws: ArmWorkspace, model: HolisticModel, boxes: Sequence[Any],
+           item: tuple[tuple[float, float, float], np.ndarray] | None, reached: Pose2D, planned: Pose2D,
+           stow: list[float]) -> Generator[None, None, Pose2D]:
+    """Turn the base on the spot to the plan's heading when it stopped off by more than
+    navigation's heading tolerance (the drive can overshoot a turn it arrives in) and the
+    stowed arm stays clear on the way; the pose then."""
+    turn = math.remainder(planned.theta - reached.theta, math.tau)
+    if abs(turn) <= nav_settings(ctx).heading_tolerance:
+        return reached
+    clear = yield from off_tick(ctx, ws, lambda: _turn_job(model, boxes, item, reached, turn, stow))
+    ctx.emit("holistic_align", turn=round(turn, 3), clear=clear, node=ctx.node_path)
+    if not clear:
+        log.info("holistic_standoff: %.3f rad off the planned heading; the stowed arm would not clear a turn", turn)
+        return reached
+    yield from rotate_by(ctx, turn)
+    base = ctx.robot.base
+    assert base is not None
+    return base.state().pose
 
 
 def _emit_plan(ctx: SkillContext, res: HolisticResult, round_: int) -> None:
@@ -249,6 +319,7 @@ def _holistic_standoff(ctx: SkillContext, point: list | None, grasp: str, yaw: f
                        size: list | None, move_arm: bool, timeout: float | None, algorithm: str | None,
                        time_limit: float | None, attempts: int | None) -> Generator[None, None, dict[str, Any]]:
     T_grasp_frame = _target(ctx, point, grasp, yaw, frame)
+    ctx.world.pop(WORLD_HOLISTIC_ARM, None)
     item = None
     if size is not None:
         if len(size) != 3 or not all(isinstance(v, (int, float)) and v > 0 for v in size):
@@ -285,9 +356,10 @@ def _holistic_standoff(ctx: SkillContext, point: list | None, grasp: str, yaw: f
         if max(abs(a - b) for a, b in zip(measured_joints(ctx), stow)) > 1e-3:
             yield from move_named(ctx, arm.stow)
         reached = yield from drive_path(ctx, planned_pose, "holistic stand-off", timeout=limit)
+        reached = yield from _align(ctx, ws, model, boxes, item, reached, planned_pose, stow)
         q = measured_joints(ctx)
         arm_plan = yield from off_tick(ctx, ws, lambda r=reached, qq=q, goal=res.arm: _arm_job(
-            ws, r, mount, qq, poses.pre_grasp, boxes, item, [list(goal), *seeds]))
+            ws, r, mount, qq, poses.pre_grasp, boxes, item, [list(goal), *seeds], stow))
         if arm_plan.success:
             break
         log.info("holistic_standoff: arm re-plan from (%.2f, %.2f, %.2f) failed (%s)%s", reached.x, reached.y,
@@ -299,5 +371,6 @@ def _holistic_standoff(ctx: SkillContext, point: list | None, grasp: str, yaw: f
         yield from execute(ctx, out, "pre-grasp from the holistic stand-off")
     assert planned_pose is not None and res is not None
     final = base.state().pose
+    ctx.world[WORLD_HOLISTIC_ARM] = HolisticArm(final, tuple(float(v) for v in out.path[-1]))
     return {"pose": [final.x, final.y, final.theta], "planned": [planned_pose.x, planned_pose.y, planned_pose.theta],
             "arm": [float(v) for v in out.path[-1]], "planning_ms": round(res.planning_time * 1e3, 1)}

@@ -281,7 +281,9 @@ def test_holistic_standoff_in_the_sim(tmp_path):
     assert plan["success"] and plan["round"] == 0
     base = seen["base"]
     assert math.dist((base.x, base.y), plan["pose"][:2]) < 0.08  # navigation stopped near the planned pose
-    assert base.x < 4.33 - 0.225 - 0.17  # not on the blocker: behind or beside it, footprint clear
+    # not on the blocker (x 4.105..4.555, y 2.1..2.5): behind or beside it, the footprint clear
+    gap = math.hypot(max(4.105 - base.x, 0.0, base.x - 4.555), max(2.1 - base.y, 0.0, base.y - 2.5))
+    assert gap > 0.17
     T_pre = grasp_poses(grasp_frame(point, "front", yaw), 0, pre_grasp=(0.0, 0.0, 0.10)).pre_grasp
     T = base.matrix() @ seen["mount"] @ wx250s().fk(seen["q"])
     assert np.linalg.norm(T[:3, 3] - T_pre[:3, 3]) < 0.02  # the true tool at the pre-grasp
