@@ -120,6 +120,9 @@ class SimCore:
     #: every grasp so far: (clock time [s], item, the item's link indices the pads touch;
     #: -1 the base link): ground truth of which part of an object the fingers hold
     grasps: list[tuple[float, str, tuple[int, ...]]] = field(default_factory=list)
+    #: sim-only teleports so far (place_base, arm/gripper/head set-ups): with the clock's
+    #: step count it tells a sensor that nothing moved since its last reading
+    teleports: int = 0
     _placed: Pose2D | None = field(default=None, repr=False)
 
     def sync(self) -> None:
@@ -159,6 +162,7 @@ class SimCore:
 
     def place_base(self, pose: Pose2D) -> None:
         """Sim-only: teleport the base (true pose in ``map``) and place the body now."""
+        self.teleports += 1
         self.true_pose = pose
         self.sync()
 
@@ -411,6 +415,7 @@ class SimArm(Arm):
 
     def set_positions(self, q: Sequence[float]) -> None:
         """Sim-only: teleport the arm (setup and tests), holding there."""
+        self._c.teleports += 1
         for i, v in zip(self._idx, q):
             p.resetJointState(self._c.body, i, float(v), 0.0, physicsClientId=self._c.cid)
         self._hold = np.array(q, dtype=float)
@@ -578,6 +583,7 @@ class SimGripper(Gripper):
 
     def set_width(self, width: float) -> None:
         """Sim-only: teleport the pads (setup and tests)."""
+        self._c.teleports += 1
         for i, q in zip(self._idx, self._c.info.width_to_q(width)):
             p.resetJointState(self._c.body, i, q, 0.0, physicsClientId=self._c.cid)
         self._cmd = self._target = width
@@ -740,6 +746,7 @@ class SimGripper(Gripper):
 def _teleport_head(core: SimCore, pan: float, tilt: float) -> tuple[float, float]:
     """Put the pan/tilt joints at ``pan``, ``tilt`` [rad] (clipped to their limits) and
     hold them there with their motors; returns the clipped pose."""
+    core.teleports += 1
     out = []
     for name, v in zip(core.info.pan_tilt_joints, (pan, tilt)):
         j = core.joints[name]
@@ -976,32 +983,52 @@ class SimLidar(Lidar):
         ang = -math.pi + self._inc * np.arange(beams)
         self._dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(beams)], axis=1)
         self.scans = 0
+        self._last: tuple[tuple[int, int, bytes], tuple[np.ndarray, ...]] | None = None
+
+    def _cast(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The rays of one scan where the world is now: hit fraction (``inf``: no return),
+        hit body and link per beam, the beams' directions and hit normals in ``map``, and
+        ``T_base_lidar``. The same state gives the same rays, so a second scan in the same
+        substep with nothing teleported (the localiser's scan after a spin and the local
+        planner's in the next tick) reuses them; its noise is drawn afresh."""
+        c = self._c
+        T = c.link_T(c.info.lidar_link)
+        key = (c.clock.steps, c.teleports, T.tobytes())
+        if self._last is not None and self._last[0] == key:
+            return self._last[1]
+        d = self._dirs @ T[:3, :3].T
+        o = T[:3, 3]
+        starts = o + d * self.range_min
+        ends = o + d * self.range_max
+        hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=c.cid)
+        n = len(hits)
+        body = np.fromiter((h[0] for h in hits), dtype=np.int64, count=n)
+        link = np.fromiter((h[1] for h in hits), dtype=np.int64, count=n)
+        frac = np.where(body >= 0, np.fromiter((h[2] for h in hits), dtype=np.float64, count=n), np.inf)
+        normals = (np.array([h[4] for h in hits], dtype=np.float64).reshape(-1, 3) if self.quality != "binary"
+                   else np.zeros((0, 3)))
+        out = (frac, body, link, d, normals, np.linalg.inv(c.base_T()) @ T)
+        self._last = (key, out)
+        return out
 
     def scan(self) -> LaserScan | None:
         c = self._c
         now = c.clock.now()
         if c.faults.lidar_dropped(now):
             return None
-        T = c.link_T(c.info.lidar_link)
-        d = self._dirs @ T[:3, :3].T
-        o = T[:3, 3]
-        starts = o + d * self.range_min
-        ends = o + d * self.range_max
-        hits = p.rayTestBatch(starts.tolist(), ends.tolist(), numThreads=0, physicsClientId=c.cid)
-        frac = np.array([h[2] if h[0] >= 0 else np.inf for h in hits])
-        static = c.scene.static
+        frac, body, link, d, normals, T_base_lidar = self._cast()
         links = self._reflector_links
         covered = c.faults.reflectors_covered(now)  # reflector_dropout: None, or the names (empty: all)
         if covered is not None:
             lit = [i for n, i in self._reflector_link.items() if covered and n not in covered]
             links = np.array(lit, dtype=int)
-        refl = np.array([h[0] == static and h[1] in links for h in hits], dtype=bool)
+        refl = (body == c.scene.static) & np.isin(link, links)
         ranges = self.range_min + frac * (self.range_max - self.range_min)
         if self.quality == "binary":
             intensity = np.where(np.isfinite(frac), self.SURFACE_INTENSITY, 0.0)
             intensity[refl] = self.REFLECTOR_INTENSITY
         else:
-            intensity = self._a2_quality(hits, d, ranges, refl)
+            intensity = self._a2_quality(normals, d, ranges, refl)
         if self.noise_fraction > 0:
             sigma = np.hypot(self.noise, self.noise_fraction * np.where(np.isfinite(ranges), ranges, 0.0))
             ranges = ranges + sigma * c.rng.standard_normal(ranges.shape)
@@ -1010,13 +1037,13 @@ class SimLidar(Lidar):
         self.scans += 1
         return LaserScan(angle_min=-math.pi, angle_increment=self._inc, ranges=ranges.astype(np.float64),
                          range_min=self.range_min, range_max=self.range_max, stamp=now,
-                         T_base_lidar=c.in_base(c.info.lidar_link), intensities=intensity)
+                         T_base_lidar=T_base_lidar.copy(), intensities=intensity)
 
-    def _a2_quality(self, hits: Sequence[tuple], dirs: np.ndarray, ranges: np.ndarray, refl: np.ndarray) -> np.ndarray:
-        """RPLIDAR A2-like intensities (quality / 63) of one scan (class doc)."""
+    def _a2_quality(self, normals: np.ndarray, dirs: np.ndarray, ranges: np.ndarray, refl: np.ndarray) -> np.ndarray:
+        """RPLIDAR A2-like intensities (quality / 63) of one scan (class doc); ``normals``
+        and ``dirs`` per beam in ``map``."""
         rng = self._c.rng
         hit = np.isfinite(ranges)
-        normals = np.array([h[4] for h in hits], dtype=np.float64).reshape(-1, 3)
         cos_i = np.clip(np.abs(np.einsum("ij,ij->i", normals, dirs)), 0.0, 1.0)
         surface = 47.0 * (0.6 + 0.4 * cos_i) - 1.5 * np.where(hit, ranges, 0.0) + rng.normal(0.0, 2.0, len(ranges))
         reflector = 62.0 + rng.normal(0.0, 1.5, len(ranges))
