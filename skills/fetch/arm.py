@@ -13,6 +13,7 @@ place.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -28,7 +29,14 @@ from mmexec.skills.base import (
     wait_goal,
 )
 from mmexec.skills.fetch.profile import FetchProfile, fetch_profile
-from mmexec.skills.manipulation import CANCELLED, PlacePoses, PlanResult, grasp_poses, place_poses
+from mmexec.skills.manipulation import (
+    CANCELLED,
+    PlacePoses,
+    PlannerConfig,
+    PlanResult,
+    grasp_poses,
+    place_poses,
+)
 from mmexec.skills.manipulation.arm import (
     GRIPPER_TIMEOUT,
     WORLD_ARM,
@@ -64,6 +72,11 @@ HELD_CLEARANCE = 0.005
 #: sits a little off its planned hold can have no collision-free IK at the nominal height
 #: (the basket wall, the robot's own body) and is then dropped from a little higher.
 PLACE_RAISES = (0.0, 0.05, 0.10)
+
+#: Releases at the place pose before place gives up on an item that stays in the gripper:
+#: after each release and retract the fingers close to stow; closing on something means the
+#: released item came along (caught on the fingers), so it is taken back down and let go again.
+PLACE_RELEASES = 3
 
 
 def _item_pose_and_size(prof: FetchProfile, T_marker: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:
@@ -213,9 +226,14 @@ def _place_frame(place: Sequence[float], base_xy: tuple[float, float]) -> np.nda
 def place(ctx: SkillContext, algorithm: str | None = None, time_limit: float | None = None,
           attempts: int | None = None) -> SkillGen:
     """Seed place routine at the depot (the base must be at the depot pose): plan to the
-    place pose (profile fetch.depot.place, the item's centre); open; detach and remove
-    the item from the planning scene; retract (profile fetch.place_retract, default
-    (0, 0, 0.10) m in the place frame); close; stow the arm."""
+    place pose (profile fetch.depot.place, the item's centre; the tool turned about its
+    approach as little as possible from how it carried the item, :data:`PLACE_ROLLS`);
+    check the item is still held; open; detach and remove the item from the planning
+    scene; retract (profile fetch.place_retract, default (0, 0, 0.10) m in the place
+    frame); close, and check the fingers closed on nothing: when they close on the item
+    (it came along, caught on the fingers), go back down, open and retract again, at
+    most :data:`PLACE_RELEASES` releases in all, then POSTCONDITION with the item held;
+    stow the arm."""
     return (yield from with_arm_status(ctx, _place(ctx, algorithm, time_limit, attempts), "place"))
 
 
@@ -233,12 +251,9 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     T_map_place = _place_frame(prof.depot.place, (bp.x, bp.y) if bp is not None else (0.0, 0.0))
     # the nominal release height first; when the held item (not always held exactly as
     # planned) has no collision-free IK there, release it a little higher above the basket
-    candidates: list[tuple[float, PlacePoses]] = []
-    for raise_by in PLACE_RAISES:
-        T = T_map_place.copy()
-        T[2, 3] += raise_by
-        candidates.append((raise_by, place_poses(T_am @ T, ws.kin.approach_axis, retract=prof.place_retract,
-                                                 grasp_height=prof.grasp_height)))
+    candidates = [(raise_by, place_poses(T_am @ _raised(T_map_place, raise_by), ws.kin.approach_axis,
+                                         retract=prof.place_retract, grasp_height=prof.grasp_height))
+                  for raise_by in PLACE_RAISES]
     q, seeds, boxes = measured_joints(ctx), ik_seeds(ctx, ws, candidates[0][1].place), ctx.robot.scene
     chosen: list[tuple[float, PlacePoses]] = []
 
@@ -279,6 +294,57 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     yield from execute(ctx, back, "place retract")
     g = ctx.robot.gripper
     assert g is not None
-    yield from wait_goal(ctx, g.close(force=arm.grasp_force), timeout=GRIPPER_TIMEOUT)
+    for release_no in range(1, PLACE_RELEASES + 1):
+        yield from wait_goal(ctx, g.close(force=arm.grasp_force), timeout=GRIPPER_TIMEOUT)
+        caught, _ = holding(ctx, 0.0)
+        if not caught:  # the fingers closed on nothing: the item stayed in the basket
+            break
+        width = g.state().width
+        ctx.world[WORLD_HELD] = name  # held again: never stow (or report) it as delivered
+        ctx.emit("place_item_caught", item=name, release=release_no, width=round(width, 4), node=ctx.node_path)
+        if release_no == PLACE_RELEASES:
+            raise SkillFailure(FailureKind.POSTCONDITION,
+                               f"place: {name} still in the gripper after {PLACE_RELEASES} releases "
+                               f"(it closed on it at {width * 1e3:.0f} mm)")
+        # down again, turned half a turn about the approach every other time: an item
+        # hanging from the fingers by its wider end goes back with that end down
+        turn = math.pi if release_no % 2 else 0.0
+        again = PlacePoses(_rolled(poses.place, ws.kin.approach_axis, turn),
+                           _rolled(poses.retract, ws.kin.approach_axis, turn))
+        log.info("place: %s came along after release %d (closed at %.0f mm): down again, turned %.0f deg",
+                 name, release_no, width * 1e3, math.degrees(turn))
+        q = measured_joints(ctx)
+        down = yield from off_tick(ctx, ws, lambda q=q, T=again.place: _plan_again(ws, q, T, cfg))
+        yield from execute(ctx, planned(ctx, down, "place again"), "place again")
+        yield from release(ctx, arm.grasp_force)
+        ctx.world.pop(WORLD_HELD, None)
+        q = measured_joints(ctx)
+        up = yield from off_tick(ctx, ws, lambda q=q, T=again.retract: ws.planner.cartesian_path(q, T, config=cfg))
+        yield from execute(ctx, planned(ctx, up, "place retract"), "place retract")
     yield from move_named(ctx, arm.stow, cfg=cfg)
     return {"item": name}
+
+
+def _raised(T: np.ndarray, by: float) -> np.ndarray:
+    """``T`` moved up by ``by`` [m] (map z)."""
+    out = T.copy()
+    out[2, 3] += by
+    return out
+
+
+def _rolled(T: np.ndarray, approach_axis: int, angle: float) -> np.ndarray:
+    """Tool pose ``T`` turned by ``angle`` [rad] about its own approach axis (same origin)."""
+    c, s = math.cos(angle), math.sin(angle)
+    i, j = (approach_axis + 1) % 3, (approach_axis + 2) % 3
+    R = np.eye(4)
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return T @ R
+
+
+def _plan_again(ws: ArmWorkspace, q: list[float], T: np.ndarray, cfg: PlannerConfig) -> PlanResult:
+    """(worker thread) From the retract back to the place pose ``T`` (arm base): the
+    straight line when the tool keeps its turn, else a plan."""
+    line = ws.planner.cartesian_path(q, T, config=cfg)
+    if line.success or line.reason == CANCELLED:
+        return line
+    return ws.planner.plan_to_pose(q, T, ik_seeds=[q], config=cfg)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 from fetchkit import events_of, marker_pose, run_skill
 
@@ -21,11 +22,12 @@ from mmexec.skills.perception.detect import WORLD_MARKERS, MarkerEstimate
 @pytest.fixture
 def arm_robot(fetch_robot):
     """The fetch mock robot with a WX250s-jointed mock arm (at the profile's tuck pose)
-    and a gripper whose first close meets a 50 mm item."""
+    and a gripper whose first close meets a 50 mm item and whose later closes meet
+    nothing (place's close after its retract: the released item stayed in the basket)."""
     kin = wx250s(locobot=True)
     fetch_robot.arm = MockArm(fetch_robot.clock, limits=kin.limits,
                               start=fetch_robot.profile["named_poses"]["tuck"])
-    fetch_robot.gripper = MockGripper(fetch_robot.clock, grasps=[True], object_width=0.05)
+    fetch_robot.gripper = MockGripper(fetch_robot.clock, grasps=[True], default_grasp=False, object_width=0.05)
     return fetch_robot
 
 
@@ -59,7 +61,8 @@ def test_pick_then_place_runs_the_seed_scene_sequence(arm_robot, fetch_ctx):
     planned = [e["what"] for e in events_of(fetch_ctx, "arm_plan")]
     assert planned[:3] == ["pre-grasp", "grasp approach", "retract"] and planned[-1] == "arm to carry"
 
-    # at the depot: place detaches and removes the item, opens, closes, stows
+    # at the depot: place opens, detaches and removes the item, retracts, closes (on
+    # nothing: the item stayed in the basket), stows
     arm_robot.base.pose = Pose2D(1.0, 4.0, math.pi / 2)
     fetch_ctx.events.clear()
     run = run_skill(fetch_ctx, "place")
@@ -68,7 +71,65 @@ def test_pick_then_place_runs_the_seed_scene_sequence(arm_robot, fetch_ctx):
     assert _scene_ops(fetch_ctx) == ["detach_remove"]
     assert ws.scene.items == {} and WORLD_HELD not in fetch_ctx.world
     assert list(arm_robot.arm.state().positions) == pytest.approx(arm_robot.profile["named_poses"]["tuck"], abs=0.02)
-    assert [e["what"] for e in events_of(fetch_ctx, "arm_plan")][:2] == ["place pose", "place retract"]
+    assert [e["what"] for e in events_of(fetch_ctx, "arm_plan")] == ["place pose", "place retract", "arm to tuck"]
+    # the item was let go and not taken again: the fingers closed fully, on nothing
+    gs = arm_robot.gripper.state()
+    assert gs.grasp is GraspState.AT_POSITION and gs.width == pytest.approx(arm_robot.gripper.min_width)
+    assert arm_robot.gripper.closes == 2 and not events_of(fetch_ctx, "place_item_caught")
+
+
+def _pick_and_go_to_depot(ctx, robot) -> None:
+    _perceive(ctx, robot)
+    assert run_skill(ctx, "pick", {"marker": 7}).status is SkillStatus.SUCCESS
+    robot.base.pose = Pose2D(1.0, 4.0, math.pi / 2)
+    ctx.events.clear()
+
+
+def test_place_lets_go_again_when_the_released_item_came_along(arm_robot, fetch_ctx):
+    """The close after the retract meets the item (it caught on the fingers and rose with
+    them: the UR5e's screwdriver hanging from a pad by its handle): place takes it back
+    down turned half a turn, opens, retracts and closes again, on nothing now; it never
+    stows holding the item."""
+    from mmexec.skills.fetch.arm import _rolled
+
+    arm_robot.gripper.grasps = [True, True]  # pick; the first close after the release
+    _pick_and_go_to_depot(fetch_ctx, arm_robot)
+    followed = []
+    follow = arm_robot.arm.follow
+    arm_robot.arm.follow = lambda trajectory: followed.append(trajectory) or follow(trajectory)
+    run = run_skill(fetch_ctx, "place")
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    caught = events_of(fetch_ctx, "place_item_caught")
+    assert [(e["item"], e["release"], e["width"]) for e in caught] == [("item_7", 1, 0.05)]
+    plans = [e["what"] for e in events_of(fetch_ctx, "arm_plan")]
+    assert plans == ["place pose", "place retract", "place again", "place retract", "arm to tuck"]
+    assert arm_robot.gripper.closes == 3  # the pick's, the one that met the item, the one on nothing
+    gs = arm_robot.gripper.state()
+    assert gs.grasp is GraspState.AT_POSITION and gs.width == pytest.approx(arm_robot.gripper.min_width)
+    assert WORLD_HELD not in fetch_ctx.world
+    # the second release was half a turn about the approach axis from the first
+    kin = fetch_ctx.world[WORLD_ARM].kin
+    T0, T = (np.asarray(kin.fk(followed[i].positions[-1])) for i in (0, 2))  # ends of "place pose", "place again"
+    assert T[:3, :3] == pytest.approx(_rolled(T0, kin.approach_axis, math.pi)[:3, :3], abs=0.02)
+    assert T[:3, 3] == pytest.approx(T0[:3, 3], abs=0.01)
+
+
+def test_place_fails_holding_an_item_that_will_not_let_go(arm_robot, fetch_ctx):
+    """Every close after a release meets the item: after PLACE_RELEASES releases place
+    fails POSTCONDITION with the item held (the world model says so), not stowed and not
+    reported as delivered."""
+    from mmexec.skills.fetch.arm import PLACE_RELEASES
+
+    arm_robot.gripper.default_grasp = True
+    _pick_and_go_to_depot(fetch_ctx, arm_robot)
+    run = run_skill(fetch_ctx, "place")
+    assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.POSTCONDITION
+    assert run.failure.reason == (f"place: item_7 still in the gripper after {PLACE_RELEASES} releases "
+                                  "(it closed on it at 50 mm)")
+    assert [e["release"] for e in events_of(fetch_ctx, "place_item_caught")] == list(range(1, PLACE_RELEASES + 1))
+    assert fetch_ctx.world[WORLD_HELD] == "item_7"
+    assert arm_robot.gripper.state().grasp is GraspState.CONTACT_CLOSING
+    assert "arm to tuck" not in [e["what"] for e in events_of(fetch_ctx, "arm_plan")]
 
 
 def test_pick_closing_on_nothing_fails_postcondition_and_clears_the_scene(arm_robot, fetch_ctx):
