@@ -173,7 +173,8 @@ def qp_check(n: int) -> tuple[int, int, int, float, float, float]:
     for _ in range(n):
         qp = random_qp(rng, lim)
         keep = qp.upper < 1e29  # quadprog: C^T x >= b, every bound as a row
-        C = np.vstack([-qp.A, np.eye(3), -np.eye(3)[keep]]).T
+        n_z = qp.H.shape[0]  # (v, w, mu, s)
+        C = np.vstack([-qp.A, np.eye(n_z), -np.eye(n_z)[keep]]).T
         b = np.concatenate([-qp.b, qp.lower, -qp.upper[keep]])
         t0 = time.perf_counter()
         z, status, _ = solve_qp(qp)

@@ -11,7 +11,16 @@ Two sources per trial:
   every static part and every person, i.e. clearance >= 0 and every gap >= 0);
 * the trial's event log: the safety filter's own smallest barrier value ``h`` [m^2] over
   the circles it tracked, logged in each ``nav_tick`` record (skills/navigation/
-  local_drive.py). :func:`log_measures` counts the logged ticks and those with ``h < 0``.
+  local_drive.py, following the DWA and docking) exactly as the filter enforced it: the
+  paper's ``h = |p - c|^2 - r_u^2`` at the axle centre, ``r_u`` the circle's covering
+  radius + the footprint radius + ``nav.margin`` (skills/navigation/cbf.py), so ``h >= 0``
+  is "the footprint at least the margin clear of the circle as the lidar sees it".
+  :func:`log_measures` counts the logged ticks and those with ``h < 0``, and tells apart
+  the runs of ``h < 0`` (consecutive logged ticks) that began with *a person walking into
+  the standing base* (the circle with the smallest ``h`` a tracked person closing at more
+  than :data:`CLOSING` while the base's measured speed was at most :data:`STANDING`:
+  nothing the base could have done, bar moving sideways, which a unicycle cannot) from
+  the others (the base's own doing, or a circle first seen inside the zone).
 
 :func:`summarize_nav` folds the trials' measures into the campaign summary
 (``summary.json`` key ``nav_truth``) and :func:`nav_report_lines` into report.md.
@@ -27,7 +36,12 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["log_measures", "nav_report_lines", "summarize_nav", "truth_measures"]
+__all__ = ["CLOSING", "STANDING", "log_measures", "nav_report_lines", "summarize_nav", "truth_measures"]
+
+#: [m/s] a person closing on the base faster than this is walking into it
+CLOSING = 0.05
+#: [m/s] a base whose measured speed is at most this is standing
+STANDING = 0.05
 
 
 def truth_measures(path: Path) -> dict[str, Any]:
@@ -66,15 +80,40 @@ def truth_measures(path: Path) -> dict[str, Any]:
             "contacts": contacts, "person_contacts": person_contacts, "contact_bodies": bodies}
 
 
+def _person_walked_in(rec: Mapping[str, Any]) -> bool:
+    """The tick's smallest barrier belongs to a tracked person closing on a standing base."""
+    closing, v = rec.get("h_closing"), rec.get("v_meas")
+    return (bool(rec.get("h_person")) and isinstance(closing, (int, float)) and closing > CLOSING
+            and isinstance(v, (int, float)) and abs(v) <= STANDING)
+
+
 def log_measures(records: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     """The safety filter's logged barrier values in a trial's event log: ``nav_ticks``
-    (ticks with a barrier value), ``nav_ticks_h_negative`` and ``nav_min_h`` [m^2]; {}
-    when no tick logged one (the plain drive, or nothing tracked)."""
-    hs = [float(r["h"]) for r in records if r.get("event") == "nav_tick" and isinstance(r.get("h"), (int, float))]
-    hs = [h for h in hs if math.isfinite(h)]
-    if not hs:
+    (ticks with a barrier value), ``nav_ticks_h_negative``, of those
+    ``nav_ticks_h_negative_person_in`` (in runs of ``h < 0`` that began with a person
+    walking into the standing base; module docstring) and ``nav_runs_h_negative`` /
+    ``nav_runs_person_in`` (the runs), ``nav_ticks_escaped`` (commands from the filter's
+    escape solve) and ``nav_min_h`` [m^2]; {} when no tick logged one (the plain drive,
+    or nothing tracked)."""
+    ticks = [r for r in records if r.get("event") == "nav_tick" and isinstance(r.get("h"), (int, float))
+             and math.isfinite(r["h"])]
+    if not ticks:
         return {}
-    return {"nav_ticks": len(hs), "nav_ticks_h_negative": sum(h < 0.0 for h in hs), "nav_min_h": min(hs)}
+    negative = person_in = runs = runs_in = 0
+    in_run = run_person = False
+    for r in ticks:
+        if r["h"] < 0.0:
+            if not in_run:
+                in_run, run_person = True, _person_walked_in(r)
+                runs += 1
+                runs_in += run_person
+            negative += 1
+            person_in += run_person
+        else:
+            in_run = False
+    return {"nav_ticks": len(ticks), "nav_ticks_h_negative": negative, "nav_ticks_h_negative_person_in": person_in,
+            "nav_runs_h_negative": runs, "nav_runs_person_in": runs_in,
+            "nav_ticks_escaped": sum(bool(r.get("escaped")) for r in ticks), "nav_min_h": min(r["h"] for r in ticks)}
 
 
 def _spread(values: Sequence[float]) -> dict[str, float | None]:
@@ -110,6 +149,13 @@ def summarize_nav(truths: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "nav_ticks": nav_ticks,
         "nav_ticks_h_nonnegative_share": 1.0 - sum(t["nav_ticks_h_negative"] for t in logged) / nav_ticks
         if nav_ticks else None,
+        "nav_ticks_h_negative": sum(t["nav_ticks_h_negative"] for t in logged),
+        "nav_ticks_h_negative_person_in": sum(t.get("nav_ticks_h_negative_person_in", 0) for t in logged),
+        "nav_runs_h_negative": sum(t.get("nav_runs_h_negative", 0) for t in logged),
+        "nav_runs_person_in": sum(t.get("nav_runs_person_in", 0) for t in logged),
+        "trials_h_negative_other": sum(t["nav_ticks_h_negative"] > t.get("nav_ticks_h_negative_person_in", 0)
+                                       for t in logged),
+        "nav_ticks_escaped": sum(t.get("nav_ticks_escaped", 0) for t in logged),
         "nav_min_h": min((t["nav_min_h"] for t in logged), default=None),
     }
 
@@ -137,8 +183,15 @@ def nav_report_lines(nav: Mapping[str, Any]) -> list[str]:
         (f"| ticks with the true h >= 0 (footprint clear of everything) | "
         f"{'-' if share is None else f'{100 * share:.3f} %'} of {nav['truth_ticks']}; "
         f"{nav['trials_all_ticks_clear']}/{nav['trials']} trials at every tick |"),
-        (f"| logged ticks with the filter's h >= 0 | {'-' if hshare is None else f'{100 * hshare:.3f} %'} of "
-        f"{nav['nav_ticks']}; smallest h {_m(nav['nav_min_h'], 4)} m^2 |"),
+        (f"| logged ticks with the filter's h >= 0 (the enforced barrier: footprint >= margin from each circle) | "
+        f"{'-' if hshare is None else f'{100 * hshare:.3f} %'} of {nav['nav_ticks']}; smallest h "
+        f"{_m(nav['nav_min_h'], 4)} m^2 |"),
+        (f"| logged ticks with h < 0: a person walking into the standing base / other | "
+        f"{nav.get('nav_ticks_h_negative_person_in', 0)} ({nav.get('nav_runs_person_in', 0)} runs) / "
+        f"{nav.get('nav_ticks_h_negative', 0) - nav.get('nav_ticks_h_negative_person_in', 0)} "
+        f"({nav.get('nav_runs_h_negative', 0) - nav.get('nav_runs_person_in', 0)} runs, "
+        f"{nav.get('trials_h_negative_other', 0)} trials) |"),
+        f"| logged commands from the filter's escape (a bounded reverse, or forward) | {nav.get('nav_ticks_escaped', 0)} |",
         f"| trials with any contact (base or arm) | {nav['trials_with_contact']}/{nav['trials']}: {what} |",
         "",
     ]

@@ -2,11 +2,12 @@
 
 The formulation is that of the UR3e hierarchical-planning paper, section 4, on the
 unicycle ``xdot = v cos th, ydot = v sin th, thdot = w`` (control-affine, ``f = 0``).
-Decision variables ``z = (v, w, mu)``::
+Decision variables ``z = (v, w, mu, s)``::
 
-    minimise   (u - u_ref)^T H (u - u_ref) + p mu^2
+    minimise   (u - u_ref)^T H (u - u_ref) + p mu^2 + q s^2
     subject to LgV u + lambda V <= mu                    (CLF, relaxed by mu >= 0)
                Lgh_i u + Lfh_i + alpha h_i >= 0          (one CBF per obstacle circle)
+               Lgg_i u + Lfg_i + alpha g_i >= -s         (steering, while driven forward)
                v, w within the velocity limits and reachable within dt (acceleration)
 
 **CLF** (section 4.2): ``V = 1/2 e^T e + beta sin(delta)``, ``e = (x_r - x, y_r - y)``,
@@ -20,17 +21,43 @@ passes the pose the DWA's chosen rollout reaches ``reference_time`` seconds ahea
 local refinement of the A* path the paper's hierarchy hands to this controller, so the
 CLF and ``u_ref`` agree and ``mu`` grows only when a barrier bends the command away.
 
-**CBF** (section 4.3): the paper's ``h = (x - x_u)^2 + (y - y_u)^2 - r_u^2`` depends on
-the position only, so ``hdot = 2 (p - c) . (v cos th, v sin th)`` holds no ``w``: the
-unicycle has relative degree 2 in ``w`` and such a filter can only brake, never steer
-round. We use the standard look-ahead workaround: the barrier is written for the point
-``p_l = (x + l cos th, y + l sin th)`` a distance ``l`` ahead of the axle centre, whose
-velocity ``(v cos th - l w sin th, v sin th + l w cos th)`` holds both inputs, and the
-radius grows by ``l``: ``h = |p_l - c|^2 - (r_u + l)^2``. Then ``h >= 0`` implies
-``|p - c| >= |p_l - c| - l >= r_u``, so the paper's safe set is kept (conservatively by at
-most ``l``). ``r_u`` is the circle's safety radius: covering radius + robot radius +
-margin (the paper's over-approximation). A moving obstacle (tracked velocity ``c_dot``)
-adds the drift ``Lfh = -2 (p_l - c) . c_dot``; the paper's obstacles are static (0).
+**CBF** (section 4.3), kept where the paper puts it: ``h_i = (x - x_u)^2 + (y - y_u)^2 -
+r_u^2`` at the axle centre ``p = (x, y)``, one per obstacle circle, with ``r_u`` the
+obstacle's covering radius (the over-approximation: the obstacle confined in a circle,
+:mod:`mmexec.skills.navigation.obstacles`) + the robot's footprint radius + a stated
+``margin`` (the profile's ``nav.margin``). ``h >= 0`` is then exactly "the footprint circle
+is at least ``margin`` clear of the obstacle's circle": the barrier is the physical
+clearance less the margin, measured on the circles, and the value the filter enforces is
+the value logged (``nav_tick``'s ``h``, the smallest over the circles, at the pose the QP
+was built at). A moving obstacle (tracked velocity ``c_dot``) adds the drift
+``Lfh = -2 (p - c) . c_dot``; the paper's obstacles are static (0).
+
+**Steering** (relaxed rows): ``hdot = 2 (p - c) . (v cos th, v sin th) + Lfh`` holds no
+``w`` (the unicycle has relative degree 2 in ``w``), so the barrier alone can only slow
+the base, stop it, or move it along its heading. While the nominal command drives the
+base forward (``v_ref > 0``), one more row per circle bends it round: the usual
+look-ahead barrier ``g_i = |p_l - c_i|^2 - (r_u + l)^2`` at ``p_l = p + l (cos th, sin
+th)``, whose derivative holds ``w`` (``Lgg = (2 (p_l - c) . e_th, 2 l (p_l - c) . e_perp)``),
+relaxed by the slack ``s >= 0`` weighted ``q`` (:attr:`CbfConfig.steer_weight`): the
+filter turns away from a circle it closes on, as far as a turn costs less than the
+slack, and the hard barrier ``h`` still bounds what it may do. ``g >= 0`` implies ``h >=
+0`` but asks up to ``2 l`` more clearance facing a circle; the previous filter enforced
+it as *the* barrier, and the people of the crowd campaigns, who stop 0.3 m from the
+footprint, stood inside its zone at 36 % of the logged ticks while the forward-only base
+could not restore it (and the log called that ``h < 0``). Neither happens with ``g``
+relaxed, and with no steering rows when the base is told to stand.
+
+**Escape** (a bounded reverse, or forward, motion): a base that may only brake cannot
+restore ``h`` once someone steps inside the zone (``h < 0`` asks for ``hdot > 0``: moving
+away). The QP is first solved within the nominal bounds (forward only, capped by the
+caller). When that is infeasible, the escape solve (:func:`escape_qp`) takes the command
+closest to standing still with ``v`` in ``[-e_back, e_fwd]`` (within the acceleration
+bound), ``e`` at most :attr:`CbfConfig.escape_speed` and limited by the room the caller
+measured behind and ahead on the lidar costmap (the lidar sees 360 degrees; the base has
+no rear bumper), and every barrier relaxed by one heavily weighted slack: the base backs
+away (or moves on) as far as that keeps or restores the barriers, and stands where no
+motion along its heading helps (someone walking into its side, which a unicycle cannot
+get out of the way of). Without room it brakes at full deceleration.
 
 **alpha** (section 4.3 and the experiments): the standard condition used here is
 ``hdot >= -alpha h``: alpha bounds how fast ``h`` may *decrease* (h decays at most as
@@ -48,14 +75,18 @@ obstacle at distance D caps the speed near ``alpha sqrt(D^2 - R^2)`` (0.1-0.15 m
 someone walked towards it. The defaults are ``alpha = 1.0`` and ``alpha_tight = 2.0``
 [1/s] (:data:`PAPER_ALPHA` and :data:`PAPER_ALPHA_TIGHT` keep the paper's for
 comparisons; benchmarks/local_planner.py runs both). Safety, in the tight case too,
-comes from the barrier itself, not from the choice of alpha. The condition is imposed on the continuous-time derivative while the
-command is held for a tick ``dt``; with ``alpha dt << 1`` (0.05-0.1 at 20 Hz) the sampling
-error is second order in ``dt``, and the look-ahead's extra ``l`` covers it in practice.
+comes from the barrier itself, not from the choice of alpha. The condition is imposed on
+the continuous-time derivative while the command is held for a tick ``dt``; with ``alpha
+dt << 1`` (0.05-0.1 at 20 Hz) the sampling error is second order in ``dt`` (and of the
+safe sign on a straight line past a static circle, where ``h`` is convex in time); the
+margin covers the rest.
 
 **Solver**: DAQP (a dual active-set solver for dense QPs; ``daqp.solve``), a few
-microseconds for these 3-variable problems. An infeasible QP (the barriers cannot all be
-met within the acceleration bounds, e.g. a person walking into a braking robot) is
-reported as :attr:`QpStatus.INFEASIBLE` and the command brakes at full deceleration.
+microseconds for these 4-variable problems. A QP infeasible with the escape too (the
+barriers cannot all be met within the acceleration bounds, e.g. a person walking into the
+side of a braking robot) is reported as :attr:`QpStatus.INFEASIBLE` and the command
+brakes at full deceleration; :attr:`CbfResult.escaped` marks a command from the escape
+solve.
 
 Frames: ``map``; m, rad, s; ``h`` in m^2, ``V`` in m^2.
 """
@@ -72,15 +103,22 @@ import numpy as np
 
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.skills.navigation.checks import checked, non_negative, positive
-from mmexec.skills.navigation.limits import BaseLimits
+from mmexec.skills.navigation.limits import BaseLimits, reachable
 from mmexec.skills.navigation.obstacles import Circles
 
-__all__ = ["PAPER_ALPHA", "PAPER_ALPHA_TIGHT", "CbfConfig", "CbfFilter", "CbfQp", "CbfResult", "QpStatus", "barrier", "build_qp", "solve_qp"]
+__all__ = ["PAPER_ALPHA", "PAPER_ALPHA_TIGHT", "CbfConfig", "CbfFilter", "CbfQp", "CbfResult", "QpStatus", "barrier",
+           "build_qp", "escape_qp", "solve_qp"]
 
 log = logging.getLogger(__name__)
 
 #: DAQP's infinity (bounds at or beyond it are absent)
 QP_INF = 1e30
+#: [s^2/m^4] weight of the escape solve's barrier slack (:func:`escape_qp`): large, so
+#: any motion that keeps a barrier is taken
+ESCAPE_SLACK_WEIGHT = 1e4
+#: [m^2/s] an escape slack at most this is "every barrier kept" (the slack's weight
+#: leaves it a few 1e-6 above 0 where a barrier binds)
+ESCAPE_KEPT = 1e-4
 
 
 #: [1/s] the UR3e paper's alpha in the open and in tight spaces (section 4.3), for
@@ -93,7 +131,12 @@ class CbfConfig:
     """Filter parameters: ``alpha``, ``alpha_tight``, ``lam``, ``lam_tight`` [1/s];
     ``tight_gap`` [m]; ``beta`` [m^2] heading weight of V; ``slack_weight`` p [s^2/m^4]
     (mu is in m^2/s); ``weight_v`` [s^2/m^2] and ``weight_w`` [s^2/rad^2], the diagonal
-    of H; ``lookahead`` l [m]; the base's ``limits``."""
+    of H; the base's ``limits``; ``escape_speed`` [m/s], the most the escape solve may
+    move the base along its heading, either way (module docstring); ``lookahead`` l [m]
+    of the steering rows' point (not of the barrier, which sits at the axle centre), and
+    the headroom the layers above keep beyond the zone (the DWA's rollouts, the re-plan's
+    discs and the goal moves treat each circle as ``l`` larger); ``steer_weight`` q
+    [s^2/m^4] of the steering rows' slack ``s``."""
 
     limits: BaseLimits = field(default_factory=BaseLimits)
     alpha: float = 1.0
@@ -106,12 +149,14 @@ class CbfConfig:
     weight_v: float = 1.0
     weight_w: float = 0.1
     lookahead: float = 0.10
+    steer_weight: float = 200.0
+    escape_speed: float = 0.10
 
     def validate(self) -> list[str]:
         errs = self.limits.validate()
         errs += positive(self, "alpha", "alpha_tight", "lam", "lam_tight", "slack_weight", "weight_v", "weight_w",
-                         "lookahead")
-        errs += non_negative(self, "beta", "tight_gap")
+                         "lookahead", "steer_weight")
+        errs += non_negative(self, "beta", "tight_gap", "escape_speed")
         return errs
 
 
@@ -123,8 +168,10 @@ class QpStatus(enum.Enum):
 @dataclass(frozen=True)
 class CbfQp:
     """``min 1/2 z^T H z + f^T z`` s.t. ``A z <= b`` and ``lower <= z <= upper``, with
-    ``z = (v, w, mu)``; row 0 of ``A`` is the CLF (when ``has_clf``), the rest the CBFs.
-    ``h`` (k,) the barrier values [m^2], ``V`` the CLF value [m^2]."""
+    ``z = (v, w, mu, s)``; row 0 of ``A`` is the CLF (when ``has_clf``), then one barrier
+    row per circle (:attr:`cbf_rows`), then, when the base is driven forward, one
+    steering row per circle (:attr:`steer_rows`, relaxed by ``s``). ``h`` (k,) the
+    barrier values [m^2], ``V`` the CLF value [m^2]."""
 
     H: np.ndarray
     f: np.ndarray
@@ -140,15 +187,21 @@ class CbfQp:
 
     @property
     def cbf_rows(self) -> slice:
-        return slice(1 if self.has_clf else 0, self.A.shape[0])
+        start = 1 if self.has_clf else 0
+        return slice(start, start + self.h.size)
+
+    @property
+    def steer_rows(self) -> slice:
+        return slice(self.cbf_rows.stop, self.A.shape[0])
 
 
 @dataclass(frozen=True)
 class CbfResult:
     """The filtered command ``(v, w)`` [m/s, rad/s], the CLF slack ``mu`` [m^2/s],
-    ``status``, barrier values ``h`` (k,) [m^2] at the current state, ``active`` (k,)
-    True where a barrier constraint binds (non-zero multiplier), and the ``alpha`` used
-    (``tight`` when ``alpha_tight``)."""
+    ``status``, barrier values ``h`` (k,) [m^2] at the current state (the enforced
+    barrier, at the axle centre), ``active`` (k,) True where a circle's barrier or
+    steering row binds (non-zero multiplier), the ``alpha`` used (``tight`` when ``alpha_tight``), and
+    ``escaped``: the nominal bounds left no safe command and the escape solve's was used."""
 
     v: float
     w: float
@@ -159,18 +212,21 @@ class CbfResult:
     alpha: float
     tight: bool
     V: float
+    escaped: bool = False
 
 
-def _offsets(pose: Pose2D, circles: Circles, lookahead: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``p_l - c_i`` (x and y parts) and ``h_i`` at the look-ahead point of ``pose``."""
-    dx = pose.x + lookahead * math.cos(pose.theta) - circles.centres[:, 0]
-    dy = pose.y + lookahead * math.sin(pose.theta) - circles.centres[:, 1]
-    return dx, dy, dx * dx + dy * dy - (circles.safety_radii + lookahead) ** 2
+def _offsets(pose: Pose2D, circles: Circles) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``p - c_i`` (x and y parts) and ``h_i`` at the axle centre of ``pose``."""
+    dx = pose.x - circles.centres[:, 0]
+    dy = pose.y - circles.centres[:, 1]
+    return dx, dy, dx * dx + dy * dy - circles.safety_radii ** 2
 
 
-def barrier(pose: Pose2D, circles: Circles, lookahead: float) -> np.ndarray:
-    """``h_i = |p_l - c_i|^2 - (r_u,i + l)^2`` [m^2] at the look-ahead point of ``pose``."""
-    return _offsets(pose, circles, lookahead)[2]
+def barrier(pose: Pose2D, circles: Circles) -> np.ndarray:
+    """The paper's ``h_i = |p - c_i|^2 - r_u,i^2`` [m^2] at the axle centre of ``pose``
+    (``r_u``: the circles' safety radii; ``h >= 0``: the footprint at least the margin
+    clear of the circle)."""
+    return _offsets(pose, circles)[2]
 
 
 def build_qp(pose: Pose2D, u_ref: tuple[float, float], reference: Pose2D | None, circles: Circles,
@@ -179,18 +235,27 @@ def build_qp(pose: Pose2D, u_ref: tuple[float, float], reference: Pose2D | None,
     ``reference`` pose (None: no CLF row), obstacle ``circles``, previous command
     ``u_prev`` and tick ``dt`` [s] (for the acceleration bounds), optional forward speed
     cap [m/s]."""
-    cfg, lim, l = config, config.limits, config.lookahead
+    cfg, lim = config, config.limits
     c, s = math.cos(pose.theta), math.sin(pose.theta)
     gap = np.hypot(circles.centres[:, 0] - pose.x, circles.centres[:, 1] - pose.y) - circles.safety_radii
     tight = int(np.count_nonzero(gap < cfg.tight_gap)) >= 2
     alpha = cfg.alpha_tight if tight else cfg.alpha
     lam = cfg.lam_tight if tight else cfg.lam
-    dx, dy, h = _offsets(pose, circles, l)
-    lgh_v = 2.0 * (dx * c + dy * s)
-    lgh_w = 2.0 * l * (-dx * s + dy * c)
+    dx, dy, h = _offsets(pose, circles)
+    zero = np.zeros_like(h)
+    lgh_v = 2.0 * (dx * c + dy * s)  # no w: relative degree 2 in w (module docstring)
     lfh = -2.0 * (dx * circles.velocities[:, 0] + dy * circles.velocities[:, 1])
-    rows = [np.stack([-lgh_v, -lgh_w, np.zeros_like(h)], axis=1)]
+    rows = [np.stack([-lgh_v, zero, zero, zero], axis=1)]
     rhs = [lfh + alpha * h]
+    steer = u_ref[0] > 0.0 and h.size > 0
+    if steer:  # the look-ahead point's barrier, relaxed by s (module docstring, "Steering")
+        la = cfg.lookahead
+        gx, gy = dx + la * c, dy + la * s
+        g = gx * gx + gy * gy - (circles.safety_radii + la) ** 2
+        lfg = -2.0 * (gx * circles.velocities[:, 0] + gy * circles.velocities[:, 1])
+        rows.append(np.stack([-2.0 * (gx * c + gy * s), -2.0 * la * (-gx * s + gy * c), zero, -np.ones_like(h)],
+                             axis=1))
+        rhs.append(lfg + alpha * g)
     V = 0.0
     if reference is not None:
         ex, ey = reference.x - pose.x, reference.y - pose.y
@@ -198,17 +263,17 @@ def build_qp(pose: Pose2D, u_ref: tuple[float, float], reference: Pose2D | None,
         delta = abs(dth) / 2.0
         V = 0.5 * (ex * ex + ey * ey) + cfg.beta * math.sin(delta)
         lgv = (-(ex * c + ey * s), -0.5 * cfg.beta * math.cos(delta) * float(np.sign(dth)))
-        rows.insert(0, np.array([[lgv[0], lgv[1], -1.0]]))
+        rows.insert(0, np.array([[lgv[0], lgv[1], -1.0, 0.0]]))
         rhs.insert(0, np.array([-lam * V]))
     v_lo, v_hi, w_lo, w_hi = lim.window(u_prev[0], u_prev[1], dt, v_cap)
     wv, ww = cfg.weight_v, cfg.weight_w
     return CbfQp(
-        H=np.diag([2.0 * wv, 2.0 * ww, 2.0 * cfg.slack_weight]),
-        f=np.array([-2.0 * wv * u_ref[0], -2.0 * ww * u_ref[1], 0.0]),
+        H=np.diag([2.0 * wv, 2.0 * ww, 2.0 * cfg.slack_weight, 2.0 * cfg.steer_weight]),
+        f=np.array([-2.0 * wv * u_ref[0], -2.0 * ww * u_ref[1], 0.0, 0.0]),
         A=np.ascontiguousarray(np.concatenate(rows, axis=0)),
         b=np.concatenate(rhs),
-        lower=np.array([v_lo, w_lo, 0.0]),
-        upper=np.array([v_hi, w_hi, QP_INF]),
+        lower=np.array([v_lo, w_lo, 0.0, 0.0]),
+        upper=np.array([v_hi, w_hi, QP_INF, QP_INF if steer else 0.0]),
         has_clf=reference is not None,
         h=h,
         V=V,
@@ -217,19 +282,48 @@ def build_qp(pose: Pose2D, u_ref: tuple[float, float], reference: Pose2D | None,
     )
 
 
+def escape_qp(qp: CbfQp, u_prev: tuple[float, float], dt: float, room: tuple[float, float],
+              config: CbfConfig) -> CbfQp:
+    """The escape solve's QP for the tick whose nominal QP ``qp`` was infeasible, over
+    ``z = (v, w, sigma)``: the command closest to standing still (``u_ref = 0``) with
+    every barrier row of ``qp`` relaxed by one slack ``sigma >= 0`` [m^2/s] weighted
+    :data:`ESCAPE_SLACK_WEIGHT`, so the barriers are kept where any motion can keep them
+    and violated as little as the bounds allow where none can (someone already inside
+    the zone: ``hdot >= alpha |h|`` may need more than one tick's acceleration); ``v``
+    within ``[-room[0], room[1]]`` [m/s] and reachable from ``u_prev`` within ``dt``,
+    ``w`` within its window; no CLF row, no steering rows."""
+    lim = config.limits
+    rows = qp.cbf_rows
+    A = qp.A[rows]
+    v_lo, v_hi = reachable(u_prev[0], -room[0], room[1], lim.accel_v * dt)
+    return CbfQp(
+        H=np.diag([2.0 * config.weight_v, 2.0 * config.weight_w, 2.0 * ESCAPE_SLACK_WEIGHT]),
+        f=np.zeros(3),
+        A=np.ascontiguousarray(np.column_stack([A[:, :2], -np.ones(A.shape[0])])),
+        b=qp.b[rows].copy(),
+        lower=np.array([v_lo, qp.lower[1], 0.0]),
+        upper=np.array([v_hi, qp.upper[1], QP_INF]),
+        has_clf=False,
+        h=qp.h,
+        V=qp.V,
+        alpha=qp.alpha,
+        tight=qp.tight,
+    )
+
+
 def solve_qp(qp: CbfQp) -> tuple[np.ndarray, QpStatus, np.ndarray]:
     """Solve with DAQP: the minimiser ``z``, the status, and the multipliers of the rows
     of ``A`` (>= 0; 0 for inactive rows). ``z`` is nan when infeasible."""
-    m = qp.A.shape[0]
+    m, n = qp.A.shape
     bupper = np.concatenate([qp.upper, qp.b])
     blower = np.concatenate([qp.lower, np.full(m, -QP_INF)])
-    sense = np.zeros(3 + m, dtype=np.int32)
+    sense = np.zeros(n + m, dtype=np.int32)
     z, _, flag, info = daqp.solve(qp.H, qp.f, qp.A, bupper, blower, sense)
     if flag in (1, 2):
-        return np.asarray(z, dtype=float), QpStatus.OPTIMAL, np.asarray(info["lam"], dtype=float)[3:]
+        return np.asarray(z, dtype=float), QpStatus.OPTIMAL, np.asarray(info["lam"], dtype=float)[n:]
     if flag != -1:
         log.warning("DAQP ended with exit flag %d (not optimal, not infeasible); treating as infeasible", flag)
-    return np.full(3, np.nan), QpStatus.INFEASIBLE, np.zeros(m)
+    return np.full(n, np.nan), QpStatus.INFEASIBLE, np.zeros(m)
 
 
 class CbfFilter:
@@ -239,16 +333,32 @@ class CbfFilter:
         self.config = checked(config or CbfConfig())
 
     def filter(self, pose: Pose2D, u_ref: tuple[float, float], reference: Pose2D | None, circles: Circles,
-               u_prev: tuple[float, float], dt: float, v_cap: float | None = None) -> CbfResult:
+               u_prev: tuple[float, float], dt: float, v_cap: float | None = None,
+               room: tuple[float, float] = (0.0, 0.0)) -> CbfResult:
         """The command closest to ``u_ref`` (in the H metric) that meets every barrier and
         the bounds, tracking ``reference`` as far as the slack allows; see :func:`build_qp`.
-        When the QP is infeasible the command brakes at full deceleration from ``u_prev``."""
+        When that QP is infeasible and the caller measured room to move (``room = (back,
+        ahead)``: the speeds [m/s] from which the base can still stop in the room behind
+        and ahead; module docstring), the escape solve's command (:func:`escape_qp`, ``v``
+        also within ``+-escape_speed``; ``escaped``), reported INFEASIBLE when even that
+        cannot keep every barrier. Without room the command brakes at full deceleration
+        from ``u_prev`` (INFEASIBLE)."""
         qp = build_qp(pose, u_ref, reference, circles, u_prev, dt, self.config, v_cap)
         z, status, lam = solve_qp(qp)
-        rows = qp.cbf_rows
         if status is QpStatus.OPTIMAL:
-            return CbfResult(float(z[0]), float(z[1]), float(z[2]), status, qp.h, lam[rows] > 1e-9,
-                             qp.alpha, qp.tight, qp.V)
+            active = lam[qp.cbf_rows] > 1e-9
+            if qp.steer_rows.stop > qp.steer_rows.start:
+                active |= lam[qp.steer_rows] > 1e-9
+            return CbfResult(float(z[0]), float(z[1]), float(z[2]), status, qp.h, active, qp.alpha, qp.tight, qp.V)
+        e = self.config.escape_speed
+        back, ahead = min(e, max(0.0, room[0])), min(e, max(0.0, room[1]))
+        if back + ahead > 0.0:
+            eq = escape_qp(qp, u_prev, dt, (back, ahead), self.config)
+            z, st, lam = solve_qp(eq)
+            if st is QpStatus.OPTIMAL:  # (always, but for a solver failure)
+                kept = QpStatus.OPTIMAL if z[2] <= ESCAPE_KEPT else QpStatus.INFEASIBLE
+                return CbfResult(float(z[0]), float(z[1]), 0.0, kept, qp.h, lam > 1e-9, qp.alpha, qp.tight,
+                                 qp.V, True)
         v, w = self.config.limits.brake(u_prev[0], u_prev[1], dt)
         log.debug("CBF QP infeasible at (%.2f, %.2f, %.2f), min h %.3f m^2: braking", pose.x, pose.y,
                     pose.theta, float(qp.h.min()) if qp.h.size else math.nan)

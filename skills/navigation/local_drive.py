@@ -70,7 +70,12 @@ from mmexec.skills.navigation.astar import plan_path, simplify_path
 from mmexec.skills.navigation.cbf import QpStatus
 from mmexec.skills.navigation.dwa import DwaStatus
 from mmexec.skills.navigation.grid import CostMap, inflate
-from mmexec.skills.navigation.local_planner import LocalCommand, LocalPlanner, LocalPlannerConfig
+from mmexec.skills.navigation.local_planner import (
+    LocalCommand,
+    LocalPlanner,
+    LocalPlannerConfig,
+    barrier_fields,
+)
 from mmexec.skills.navigation.obstacles import Circles
 from mmexec.skills.navigation.tracker import PathTracker, TrackerConfig
 from mmexec.skills.primitives import brake
@@ -414,7 +419,7 @@ class LocalDrive:
         f = cmd.cbf
         self.ctx.emit("nav_tick", pose=_rounded([pose.x, pose.y, pose.theta]), cmd=_rounded([cmd.v, cmd.w]),
                       ref=_rounded([cmd.dwa.v, cmd.dwa.w]),
-                      h=round(float(f.h.min()), 4) if f is not None and f.h.size else None,
+                      **cmd.barrier_fields(self.base.state().v),
                       active=int(f.active.sum()) if f is not None else 0,
                       infeasible=f is not None and f.status is QpStatus.INFEASIBLE,
                       status=cmd.status.value, blocked=cmd.path_blocked, scale=round(cmd.speed_scale, 3),
@@ -600,7 +605,10 @@ class LocalDrive:
                 return True
             circles = self.planner.circles_at(now)
             if len(circles) and self.config.planner.use_cbf:
-                f = self.planner.cbf.filter(st.pose, (v, w), None, circles, u, dt, max(v, 0.0))
+                f = self.planner.safe(st.pose, (v, w), None, circles, u, dt, max(v, 0.0))
+                self.ctx.emit("nav_tick", pose=_rounded([st.pose.x, st.pose.y, st.pose.theta]), cmd=_rounded([f.v, f.w]),
+                              ref=_rounded([v, w]), **barrier_fields(f, circles, st.pose, st.v), active=int(f.active.sum()),
+                              infeasible=f.status is QpStatus.INFEASIBLE, status="dock", circles=len(circles))
                 v, w = f.v, f.w
             if tracker.phase != phase:
                 phase, best, t_best = tracker.phase, math.inf, now

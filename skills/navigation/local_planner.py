@@ -7,14 +7,19 @@ tick (it never blocks, never reads a clock and never talks to a device):
    costmap's clearing and marking (which also says which hits are not the static map),
    clusters and circles of those hits, and the tracker (velocities, people);
 2. the social speed scale from the nearest person caps the forward speed;
-3. the DWA picks ``u_ref`` on the costmap and the circles, their safety radii grown by the
-   filter's look-ahead ``l`` (the zone the filter guards; a DWA that planned into it
-   would only be stopped by the filter), people moved at their tracked velocity;
+3. the DWA picks ``u_ref`` on the costmap and the circles, their safety radii grown by
+   ``CbfConfig.lookahead`` ``l`` (headroom beyond the zone the filter guards; a DWA that
+   planned into the zone would only be stopped by the filter), people moved at their
+   tracked velocity;
 4. the CLF-CBF filter makes ``u_ref`` safe against *every* circle, tracking the pose the
-   DWA's rollout reaches ``reference_time`` seconds ahead. It may slow the base and steer
-   it, but never drive it faster than the DWA's command: the filter sees only the
-   circles, and a faster command (fleeing someone who walks up from behind) is one the
-   costmap never checked; when slowing and steering cannot keep every barrier, it brakes.
+   DWA's rollout reaches ``reference_time`` seconds ahead. Within the nominal bounds it
+   may only slow the base, never drive it faster than the DWA's command (the filter sees
+   only the circles, and a faster command, fleeing someone who walks up from behind, is
+   one the costmap never checked). When that leaves no safe command (someone stepped
+   into the zone, or walks at the base), the filter may *escape*: move the base along
+   its heading at up to ``CbfConfig.escape_speed``, back or forward, as far as the
+   costmap shows room for the footprint (:meth:`LocalPlanner.escape_room`; the lidar
+   sees all round); when that cannot keep every barrier either, it brakes.
 
 The caller acts on the DWA status and ``path_blocked`` (re-plan globally on
 :meth:`LocalPlanner.replan_grid`; recover when ``STUCK``).
@@ -24,7 +29,11 @@ Frames: ``map``; m, rad, s.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
 
 from mmexec.drivers.interfaces import LaserScan, OccupancyGrid, Pose2D
 from mmexec.skills.navigation.cbf import CbfConfig, CbfFilter, CbfResult
@@ -41,7 +50,25 @@ from mmexec.skills.navigation.obstacles import (
 from mmexec.skills.navigation.social import SocialConfig, speed_scale
 from mmexec.skills.navigation.tracks import ObstacleTracker, TrackingConfig
 
-__all__ = ["LocalCommand", "LocalPlanner", "LocalPlannerConfig"]
+__all__ = ["LocalCommand", "LocalPlanner", "LocalPlannerConfig", "barrier_fields"]
+
+#: [m] how far along the heading, each way, :meth:`LocalPlanner.escape_room` looks
+ESCAPE_LOOK = 0.3
+
+
+def barrier_fields(f: CbfResult | None, circles: Circles, pose: Pose2D, v_meas: float) -> dict[str, Any]:
+    """The event-log summary of the filter's result ``f`` over ``circles`` at ``pose``
+    (see :meth:`LocalCommand.barrier_fields`)."""
+    out: dict[str, Any] = {"h": None, "v_meas": round(float(v_meas), 3)}
+    if f is None or not f.h.size:
+        return out
+    k = int(np.argmin(f.h))
+    d = np.array([pose.x - circles.centres[k, 0], pose.y - circles.centres[k, 1]])
+    n = float(np.hypot(*d))
+    closing = float(d @ circles.velocities[k]) / n if n > 1e-9 else 0.0
+    out.update(h=round(float(f.h[k]), 4), h_person=bool(circles.person[k]), h_closing=round(closing, 3),
+               escaped=f.escaped)
+    return out
 
 
 @dataclass(frozen=True)
@@ -102,7 +129,8 @@ class LocalPlannerConfig:
 class LocalCommand:
     """One tick: the command ``(v, w)`` to send [m/s, rad/s]; the DWA's result (status,
     ``path_blocked``, its own command); the filter's (None when ``use_cbf`` is off); the
-    circles used (tracked, at ``now``); the social speed scale applied."""
+    circles used (tracked, at ``now``); the social speed scale applied; the ``pose`` the
+    tick was computed at."""
 
     v: float
     w: float
@@ -110,6 +138,17 @@ class LocalCommand:
     cbf: CbfResult | None
     circles: Circles
     speed_scale: float
+    pose: Pose2D
+
+    def barrier_fields(self, v_meas: float) -> dict[str, Any]:
+        """The enforced barrier's summary for the event log (``nav_tick``): ``h`` [m^2]
+        the smallest barrier value the filter enforced this tick (None without the filter
+        or without circles), ``h_person`` whether that circle is a tracked person,
+        ``h_closing`` [m/s] how fast it closes on the base (its tracked velocity towards
+        the base's centre; > 0 approaching), ``v_meas`` [m/s] the base's measured speed,
+        ``escaped`` whether the command came from the filter's escape solve; see
+        :func:`mmexec.executive.campaign.navtruth.log_measures`."""
+        return barrier_fields(self.cbf, self.circles, self.pose, v_meas)
 
     @property
     def status(self) -> DwaStatus:
@@ -166,6 +205,38 @@ class LocalPlanner:
         c = self.circles_at(now).select(~self._tracks.person)
         return self.costmap.merged_grid(c.centres, c.radii + self.config.cbf.lookahead + widen)
 
+    def escape_room(self, pose: Pose2D) -> tuple[float, float]:
+        """The speeds [m/s] ``(back, ahead)`` from which the base, moving straight along
+        its heading, can still stop at full deceleration in the room the costmap shows
+        behind and ahead of ``pose`` (up to :data:`ESCAPE_LOOK`): the footprint keeps
+        the radius + margin from every static or marked cell, or, where it is already
+        closer, gets no closer than now. At most ``CbfConfig.escape_speed`` (the filter's
+        escape, :meth:`CbfFilter.filter`)."""
+        cfg = self.config
+        e = cfg.cbf.escape_speed
+        if e <= 0.0:
+            return 0.0, 0.0
+        step = 0.5 * self.costmap.resolution
+        ds = np.arange(step, ESCAPE_LOOK + 1e-9, step)
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        sign = np.array([-1.0, 1.0])[:, None]
+        pts = np.stack([pose.x + sign * ds * c, pose.y + sign * ds * s], axis=-1)
+        clear = self.costmap.clearance_at(pts)
+        here = float(self.costmap.clearance_at(np.array([[pose.x, pose.y]]))[0])
+        need = min(cfg.limits.radius + cfg.margin, here)
+        out = []
+        for row in clear >= need:
+            blocked = np.flatnonzero(~row)
+            room = float(ds[blocked[0] - 1]) if blocked.size and blocked[0] > 0 else (0.0 if blocked.size else float(ds[-1]))
+            out.append(min(e, math.sqrt(2.0 * cfg.limits.accel_v * max(0.0, room - step))))
+        return out[0], out[1]
+
+    def safe(self, pose: Pose2D, u_ref: tuple[float, float], reference: Pose2D | None, circles: Circles,
+             u_prev: tuple[float, float], dt: float, v_cap: float) -> CbfResult:
+        """The filter's command for ``u_ref`` (capped forward at ``v_cap`` [m/s]), with
+        the escape room measured at ``pose`` (docking calls it too)."""
+        return self.cbf.filter(pose, u_ref, reference, circles, u_prev, dt, v_cap, self.escape_room(pose))
+
     def step(self, pose: Pose2D, v_meas: float, w_meas: float, now: float, dt: float,
              scan: LaserScan | None = None) -> LocalCommand:
         """One control tick: base ``pose`` in ``map``, measured ``(v_meas, w_meas)``, clock
@@ -186,7 +257,7 @@ class LocalPlanner:
                 k = min(d.trajectory.shape[0], max(1, round(cfg.reference_time / cfg.dwa.step))) - 1
                 x, y, th = d.trajectory[k]
                 reference = Pose2D(float(x), float(y), float(th))
-            f = self.cbf.filter(pose, (d.v, d.w), reference, circles, u0, dt, min(scale * cfg.limits.max_v, max(d.v, 0.0)))
+            f = self.safe(pose, (d.v, d.w), reference, circles, u0, dt, min(scale * cfg.limits.max_v, max(d.v, 0.0)))
             v, w = f.v, f.w
         self._u = (v, w)
-        return LocalCommand(v, w, d, f, circles, scale)
+        return LocalCommand(v, w, d, f, circles, scale, pose)

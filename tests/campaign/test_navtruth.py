@@ -51,8 +51,28 @@ def test_a_sidecar_without_people_or_ticks(tmp_path):
 def test_log_measures_read_the_filters_barrier_values():
     recs = [{"event": "nav_tick", "h": 0.3}, {"event": "nav_tick", "h": None}, {"event": "nav_tick", "h": -0.05},
             {"event": "base_status"}, {"event": "nav_tick", "h": 1.2}]
-    assert log_measures(recs) == {"nav_ticks": 3, "nav_ticks_h_negative": 1, "nav_min_h": -0.05}
+    assert log_measures(recs) == {"nav_ticks": 3, "nav_ticks_h_negative": 1, "nav_ticks_h_negative_person_in": 0,
+                                  "nav_runs_h_negative": 1, "nav_runs_person_in": 0, "nav_ticks_escaped": 0,
+                                  "nav_min_h": -0.05}
     assert log_measures([{"event": "nav_tick", "h": None}]) == {}
+
+
+def _tick(h, person=False, closing=0.0, v=0.0, escaped=False):
+    return {"event": "nav_tick", "h": h, "h_person": person, "h_closing": closing, "v_meas": v, "escaped": escaped}
+
+
+def test_runs_of_negative_h_begun_by_a_person_walking_into_the_standing_base():
+    """A run of h < 0 counts as a person's doing only when it began with a tracked person
+    closing on a base that stood; the whole run then (the base backing off, the person
+    standing); a run begun while the base drove, or by a person standing, is the other kind."""
+    recs = [_tick(0.2), _tick(-0.01, True, 0.4, 0.0), _tick(-0.03, True, 0.0, -0.05, True), _tick(-0.01, True, 0.0,
+            -0.1, True), _tick(0.01),                       # a person walked in: 3 ticks, one run
+            _tick(-0.02, True, 0.4, 0.3), _tick(0.1),       # the base drove at them: other
+            _tick(-0.02, True, 0.0, 0.0), _tick(-0.02, False, 0.4, 0.0), _tick(0.3)]   # standing / not a person
+    m = log_measures(recs)
+    assert m["nav_ticks"] == 10 and m["nav_ticks_h_negative"] == 6
+    assert m["nav_ticks_h_negative_person_in"] == 3 and m["nav_runs_person_in"] == 1 and m["nav_runs_h_negative"] == 3
+    assert m["nav_ticks_escaped"] == 2
 
 
 def test_the_summary_and_the_report(tmp_path):
@@ -68,4 +88,5 @@ def test_the_summary_and_the_report(tmp_path):
     text = "\n".join(nav_report_lines(s))
     assert "| trials with a contact with a person (target 0) | 1/2 (1 contacts) |" in text
     assert "75.000 % of 4" in text and "90.000 % of 20" in text
+    assert "| logged ticks with h < 0: a person walking into the standing base / other | 0 (0 runs) / 2 (0 runs, 1 trials) |" in text
     assert summarize_nav([{}, {"panel_lights": 2}]) == {} and nav_report_lines({}) == []

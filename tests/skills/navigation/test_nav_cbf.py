@@ -1,5 +1,6 @@
 """CLF-CBF QP safety filter: Lie derivatives, the QP against a second solver and a grid,
-relaxation, active barriers, the look-ahead point, alpha's meaning, infeasibility."""
+relaxation, active barriers, the paper's barrier at the axle centre, alpha's meaning,
+the escape (a bounded reverse) and infeasibility."""
 
 from __future__ import annotations
 
@@ -11,7 +12,15 @@ import pytest
 import quadprog
 
 from mmexec.drivers.interfaces import Pose2D
-from mmexec.skills.navigation.cbf import CbfConfig, CbfFilter, QpStatus, barrier, build_qp, solve_qp
+from mmexec.skills.navigation.cbf import (
+    CbfConfig,
+    CbfFilter,
+    QpStatus,
+    barrier,
+    build_qp,
+    escape_qp,
+    solve_qp,
+)
 from mmexec.skills.navigation.limits import BaseLimits
 from mmexec.skills.navigation.obstacles import Circles
 
@@ -29,10 +38,11 @@ def _circles(centres, safety, velocities=None):
 
 def _quadprog(qp):
     """The same QP with quadprog (Goldfarb-Idnani dual active set): z or None if infeasible."""
-    rows = [-qp.A, np.eye(3)]
+    n = qp.H.shape[0]
+    rows = [-qp.A, np.eye(n)]
     rhs = [-qp.b, qp.lower]
     finite = qp.upper < 1e29
-    rows.append(-np.eye(3)[finite])
+    rows.append(-np.eye(n)[finite])
     rhs.append(-qp.upper[finite])
     C = np.vstack(rows).T
     try:
@@ -83,8 +93,23 @@ def test_qp_matches_quadprog_on_random_instances():
     assert min(kinds.values()) >= 50, kinds
 
 
+def test_the_escape_qp_matches_quadprog_and_is_always_feasible():
+    rng = np.random.default_rng(21)
+    worst, moved = 0.0, 0
+    for _ in range(1000):
+        qp = _random_instance(rng)
+        room = tuple(rng.uniform(0.0, 0.1, 2))
+        eq = escape_qp(qp, (rng.uniform(-0.1, 0.1), 0.0), 0.05, room, CFG)
+        z, status, _ = solve_qp(eq)
+        assert status is QpStatus.OPTIMAL
+        assert -room[0] - 1e-9 <= z[0] <= room[1] + 1e-9 or abs(z[0]) <= 0.1 + 1e-9
+        worst = max(worst, float(np.max(np.abs(z - _quadprog(eq)))))
+        moved += abs(z[0]) > 1e-6
+    assert worst < 1e-6 and moved > 100
+
+
 def _grid_optimum(qp, n=301):
-    """Brute force on a (v, w) grid over the box; mu at its least feasible value."""
+    """Brute force on a (v, w) grid over the box; mu and s at their least feasible values."""
     v = np.linspace(qp.lower[0], qp.upper[0], n)
     w = np.linspace(qp.lower[1], qp.upper[1], n)
     vv, ww = np.meshgrid(v, w, indexing="ij")
@@ -92,7 +117,9 @@ def _grid_optimum(qp, n=301):
     rows = qp.cbf_rows
     ok = np.all(u @ qp.A[rows, :2].T <= qp.b[rows] + 1e-12, axis=1)
     mu = np.maximum(0.0, u @ qp.A[0, :2] - qp.b[0]) if qp.has_clf else np.zeros(len(u))
-    z = np.column_stack([u, mu])
+    st = qp.steer_rows
+    s = np.maximum(0.0, (u @ qp.A[st, :2].T - qp.b[st]).max(axis=1)) if st.stop > st.start else np.zeros(len(u))
+    z = np.column_stack([u, mu, s])
     cost = 0.5 * ((z @ qp.H) * z).sum(axis=1) + z @ qp.f
     if not ok.any():
         return None, math.inf, (v[1] - v[0], w[1] - w[0])
@@ -131,7 +158,7 @@ def _moved(pose, u, s):
 
 
 def _h_along(pose, u, c, cv, s, cfg):
-    return barrier(_moved(pose, u, s), _circles([np.asarray(c) + cv * s], 0.4), cfg.lookahead)[0]
+    return barrier(_moved(pose, u, s), _circles([np.asarray(c) + cv * s], 0.4))[0]
 
 
 def _v_along(pose, u, ref, s, cfg):
@@ -166,23 +193,24 @@ def test_lie_derivatives_match_finite_differences():
         assert qp.V == pytest.approx(_v_along(pose, u, ref, 0.0, cfg))
 
 
-def test_the_lookahead_puts_w_into_the_barrier():
-    """The paper's position barrier has relative degree 2 in w (hdot holds no w); at the
-    look-ahead point w appears, with a coefficient proportional to l."""
-    pose = Pose2D(0.0, 0.0, 0.0)
-    circles = _circles([[1.0, 0.3]], 0.4)
-    coeff = [build_qp(pose, (0.3, 0.0), None, circles, (0.3, 0.0), 0.05, replace(CFG, lookahead=l)).A[0, 1]
-             for l in (1e-9, 0.1)]
-    assert abs(coeff[0]) < 1e-8 and abs(coeff[1]) > 0.01
-
-
-def test_lookahead_barrier_keeps_the_papers_safe_set():
+def test_the_barrier_is_the_papers_at_the_axle_centre():
+    """h = |p - c|^2 - r_u^2 at the axle centre whatever the heading (the look-ahead is
+    no part of it), so h >= 0 is exactly the footprint at least the margin clear of the
+    circle; its derivative holds no w (relative degree 2)."""
     rng = np.random.default_rng(3)
-    for _ in range(2000):
+    for _ in range(500):
         pose = Pose2D(*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi))
         c = _circles(rng.uniform(-2, 2, (1, 2)), rng.uniform(0.2, 0.8))
-        if barrier(pose, c, 0.15)[0] >= 0:
-            assert math.hypot(pose.x - c.centres[0, 0], pose.y - c.centres[0, 1]) >= c.safety_radii[0] - 1e-12
+        d = math.hypot(pose.x - c.centres[0, 0], pose.y - c.centres[0, 1])
+        assert barrier(pose, c)[0] == pytest.approx(d * d - c.safety_radii[0] ** 2)
+        turned = Pose2D(pose.x, pose.y, pose.theta + rng.uniform(-3, 3))
+        assert barrier(turned, c)[0] == pytest.approx(barrier(pose, c)[0])
+        qp = build_qp(pose, (0.3, 0.5), None, c, (0.3, 0.5), 0.05, replace(CFG, lookahead=0.3))
+        assert qp.A[0, 1] == 0.0
+    # a person 0.3 m from the footprint (the sim's people stop there) is outside the zone
+    # with the 5 cm margin, head-on or not
+    person = _circles([[0.178 + 0.3 + 0.2, 0.0]], 0.2 + 0.178 + 0.05)
+    assert barrier(Pose2D(0.0, 0.0, 0.0), person)[0] > 0
 
 
 def test_a_safe_command_passes_unchanged():
@@ -211,10 +239,25 @@ def test_the_clf_is_relaxed_when_it_cannot_be_met():
     assert solve_qp(replace(qp, upper=np.array([qp.upper[0], qp.upper[1], 0.0])))[1] is QpStatus.INFEASIBLE
 
 
+def test_driving_at_an_obstacle_the_filter_turns_away_within_the_barrier():
+    """Straight at a circle: the steering row turns the base (w is cheap), the barrier
+    h holds its rate, and the slack s takes up the rest."""
+    pose = Pose2D(0.0, 0.0, 0.0)
+    circles = _circles([[0.8, 0.4]], 0.5)
+    qp = build_qp(pose, (0.3, 0.0), None, circles, (0.3, 0.0), 0.05, CFG)
+    z, status, lam = solve_qp(qp)
+    assert status is QpStatus.OPTIMAL and qp.steer_rows == slice(1, 2)
+    assert z[1] < -0.1                                            # turns away (the circle is to the left)
+    assert qp.A[qp.cbf_rows, :2] @ z[:2] <= qp.b[qp.cbf_rows] + 1e-9
+    assert lam[qp.steer_rows][0] > 0
+    # told to stand, the base gets no steering rows (it is not turned away from people)
+    assert build_qp(pose, (0.0, 0.0), None, circles, (0.0, 0.0), 0.05, CFG).steer_rows == slice(1, 1)
+
+
 def test_a_barrier_binds_when_driving_at_an_obstacle():
     pose = Pose2D(0.0, 0.0, 0.0)
     circles = _circles([[1.0, 0.0]], 0.5)
-    cfg = replace(CFG, lookahead=0.1)
+    cfg = replace(CFG, steer_weight=1e-9)                          # the paper's barrier alone
     f = CbfFilter(cfg).filter(pose, (0.7, 0.0), None, circles, (0.7, 0.0), 1.0)
     assert f.status is QpStatus.OPTIMAL and f.active.tolist() == [True]
     qp = build_qp(pose, (0.7, 0.0), None, circles, (0.7, 0.0), 1.0, cfg)
@@ -230,12 +273,12 @@ def test_a_larger_alpha_allows_a_faster_approach():
     circles = _circles([[1.5, 0.0]], 0.5)
     speeds = []
     for alpha in (0.21, 0.46, 1.0):
-        f = CbfFilter(replace(CFG, alpha=alpha)).filter(pose, (0.7, 0.0), None, circles, (0.7, 0.0), 1.0)
+        f = CbfFilter(replace(CFG, alpha=alpha, steer_weight=1e-9)).filter(pose, (0.7, 0.0), None, circles, (0.7, 0.0), 1.0)
         speeds.append(f.v)
     assert speeds[0] < speeds[1] < speeds[2]
-    # straight at the obstacle: v <= alpha h / (2 |p_l - c|)
-    d = 1.5 - CFG.lookahead
-    h = d * d - (0.5 + CFG.lookahead) ** 2
+    # straight at the obstacle: v <= alpha h / (2 |p - c|)
+    d = 1.5
+    h = d * d - 0.5 ** 2
     assert speeds[0] == pytest.approx(0.21 * h / (2 * d), rel=1e-6)
 
 
@@ -251,15 +294,50 @@ def test_tight_spaces_switch_alpha_and_lambda():
 
 
 def test_an_infeasible_qp_brakes():
-    """A person walking fast into a robot that cannot reverse: no command keeps h from
-    falling faster than alpha allows; the filter reports it and brakes."""
+    """A person walking fast into a robot that cannot reverse (no room behind): no
+    command keeps h from falling faster than alpha allows; the filter reports it and
+    brakes."""
     cfg = replace(CFG, limits=replace(LIM, min_v=0.0))
     pose = Pose2D(0.0, 0.0, 0.0)
     circles = _circles([[0.9, 0.0]], 0.5, [[-1.5, 0.0]])
     f = CbfFilter(cfg).filter(pose, (0.3, 0.5), None, circles, (0.3, 0.5), 0.05)
-    assert f.status is QpStatus.INFEASIBLE
+    assert f.status is QpStatus.INFEASIBLE and not f.escaped
     assert (f.v, f.w) == pytest.approx((0.3 - 0.05, 0.5 - 0.175))
     assert _quadprog(build_qp(pose, (0.3, 0.5), None, circles, (0.3, 0.5), 0.05, cfg)) is None
+
+
+def test_someone_inside_the_zone_is_escaped_from_within_the_room():
+    """Someone stepped inside the zone in front of a standing base (h < 0): forward-only,
+    no command restores h (braking is infeasible); with room behind, the escape solve
+    backs off, no faster than the escape speed or the room allows, and h rises."""
+    cfg = replace(CFG, limits=replace(LIM, min_v=0.0))
+    pose = Pose2D(0.0, 0.0, 0.0)
+    circles = _circles([[0.6, 0.0]], 0.65)                       # h = 0.36 - 0.4225 < 0
+    flt = CbfFilter(cfg)
+    assert flt.filter(pose, (0.0, 0.0), None, circles, (0.0, 0.0), 0.05).status is QpStatus.INFEASIBLE
+    f = flt.filter(pose, (0.0, 0.0), None, circles, (0.0, 0.0), 0.05, room=(1.0, 1.0))
+    assert f.escaped
+    assert -cfg.escape_speed - 1e-9 <= f.v < 0.0                # backs off, within one tick's acceleration
+    assert f.v == pytest.approx(-LIM.accel_v * 0.05)
+    assert barrier(_moved(pose, (f.v, f.w), 0.05), circles)[0] > f.h[0]
+    assert f.status is QpStatus.INFEASIBLE                      # h cannot rise at rate alpha |h| in one tick
+    # once moving: as slow as restores h at rate alpha |h| (hdot = 2 (p - c) . v e_th)
+    f = flt.filter(pose, (0.0, 0.0), None, circles, (-0.1, 0.0), 0.05, room=(1.0, 1.0))
+    assert f.status is QpStatus.OPTIMAL and f.escaped
+    assert f.v == pytest.approx(-cfg.alpha * -f.h[0] / (2 * 0.6), rel=1e-3)
+    # never faster than the escape speed, nor than the room allows (one tick's deceleration)
+    fast = CbfFilter(replace(cfg, alpha=50.0))
+    assert fast.filter(pose, (0.0, 0.0), None, circles, (-0.1, 0.0), 0.05, room=(1.0, 1.0)).v == \
+        pytest.approx(-cfg.escape_speed)
+    assert fast.filter(pose, (0.0, 0.0), None, circles, (-0.1, 0.0), 0.05, room=(0.04, 1.0)).v == \
+        pytest.approx(-0.05)
+    # the escape never moves the base towards the circle: with room only ahead, it brakes
+    f = flt.filter(pose, (0.0, 0.0), None, circles, (0.0, 0.0), 0.05, room=(0.0, 1.0))
+    assert f.status is QpStatus.INFEASIBLE and (f.v, f.w) == (0.0, 0.0)
+    # someone walking into the side of the base: moving along the heading does not help
+    side = _circles([[0.0, 0.6]], 0.5, [[0.0, -1.0]])
+    f = flt.filter(pose, (0.0, 0.0), None, side, (0.0, 0.0), 0.05, room=(1.0, 1.0))
+    assert f.status is QpStatus.INFEASIBLE
 
 
 def test_cbf_config_validation():

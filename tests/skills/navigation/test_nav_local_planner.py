@@ -12,7 +12,7 @@ import pytest
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
 from mmexec.skills.navigation.limits import LOCOBOT_KOBUKI, UR5E_PLATFORM
 from mmexec.skills.navigation.local_planner import LocalPlanner, LocalPlannerConfig
-from mmexec.skills.navigation.synthetic import Walker, run_closed_loop
+from mmexec.skills.navigation.synthetic import Walker, cast_scan, run_closed_loop, unicycle_step
 
 MARGIN = 0.05
 START, GOAL = Pose2D(1.0, 3.0, 0.0), (9.0, 3.0)
@@ -60,3 +60,63 @@ def test_configs_agree_on_the_base():
     bad = replace(cfg, cbf=replace(cfg.cbf, limits=LOCOBOT_KOBUKI))
     with pytest.raises(ValueError, match="use for_base"):
         LocalPlanner(_room(), bad)
+
+
+def _stand_off_a_person(person_x: float, wall_behind: bool) -> tuple[list[float], list[float], int]:
+    """A base standing at (3, 3) facing +x, its path straight on to (9, 3); someone stands
+    at ``person_x`` on that line (inside the filter's zone when close). 3 s of ticks: the
+    enforced barrier's smallest h, the base's x, and how many commands were escapes."""
+    grid = _room()
+    if wall_behind:
+        d = np.array(grid.data, copy=True)
+        d[50:70, 55:57] = 100                      # a wall 0.2 m behind the base's back (x 2.75-2.85)
+        grid = OccupancyGrid(data=d, resolution=grid.resolution)
+    cfg = LocalPlannerConfig.for_base(LOCOBOT_KOBUKI, MARGIN)
+    planner = LocalPlanner(grid, cfg)
+    planner.set_path([(3.0, 3.0), (9.0, 3.0)], 0.0)
+    pose, v, w = Pose2D(3.0, 3.0, 0.0), 0.0, 0.0
+    hs, xs, escapes = [], [], 0
+    for k in range(60):
+        t = 0.05 * k
+        scan = cast_scan(grid, pose, np.array([[person_x, 3.0]]), np.array([0.2]), n_beams=400, stamp=t)
+        cmd = planner.step(pose, v, w, t, 0.05, scan)
+        assert cmd.cbf is not None
+        if cmd.cbf.h.size:
+            hs.append(float(cmd.cbf.h.min()))
+        escapes += cmd.cbf.escaped
+        v, w = cmd.v, cmd.w
+        pose = unicycle_step(pose, v, w, 0.05)
+        xs.append(pose.x)
+    return hs, xs, escapes
+
+
+def test_someone_inside_the_zone_is_backed_away_from_where_there_is_room():
+    """A person 0.12 m from the footprint (inside the zone: covering circle + footprint +
+    5 cm margin): the filter's escape backs the base off at low speed until h >= 0."""
+    hs, xs, escapes = _stand_off_a_person(3.5, wall_behind=False)
+    assert hs[0] < 0.0 and escapes > 0
+    assert min(xs) < 2.95 and min(np.diff([3.0, *xs])) >= -0.1 * 0.05 - 1e-9   # back, never faster than 0.1 m/s
+    assert hs[-1] >= 0.0
+
+
+def test_no_escape_into_what_the_lidar_sees_behind():
+    """The same with a wall 0.2 m behind the base's back: the room behind is what the
+    costmap shows, so the base does not back into the wall (it stands, h stays < 0)."""
+    hs, xs, _ = _stand_off_a_person(3.5, wall_behind=True)
+    assert hs[0] < 0.0
+    assert min(xs) >= 3.0 - 0.05                   # at most the few cm the room left
+    planner = LocalPlanner(_room(), LocalPlannerConfig.for_base(LOCOBOT_KOBUKI, MARGIN))
+    for pose in (Pose2D(3.0, 3.0, 0.0), Pose2D(0.3, 3.0, 0.0)):
+        planner.observe(cast_scan(_room(), pose, np.zeros((0, 2)), np.zeros(0), stamp=0.0), pose)
+        room = planner.escape_room(pose)
+        if pose.x == 3.0:
+            assert room == (pytest.approx(0.1), pytest.approx(0.1))
+        else:
+            assert room[0] == 0.0 and room[1] == pytest.approx(0.1)    # the outer wall 0.25 m behind the centre
+
+
+def test_a_person_who_keeps_the_sims_distance_leaves_h_positive():
+    """The sim's people stop 0.3 m from the footprint: that is outside the zone, so the
+    enforced barrier stays >= 0 and the base is not pushed back."""
+    hs, xs, escapes = _stand_off_a_person(3.0 + 0.178 + 0.3 + 0.2, wall_behind=False)
+    assert min(hs) >= 0.0 and escapes == 0 and min(xs) >= 3.0 - 1e-9
