@@ -625,6 +625,38 @@ def _object_box(t: ObjectTarget) -> tuple[np.ndarray, tuple[float, float, float]
     return T, (g.footprint[0], g.footprint[1], g.height)
 
 
+#: [m] how far a base that stopped inside the inflated map may back off before the line
+#: behind it must be free (two cells of the lab maps, as the holistic planner's start)
+BACK_OFF_EXEMPT = 0.10
+
+
+def _back_off_distance(ctx: SkillContext, distance: float) -> float:
+    """How far to back off from here: ``distance`` [m] when the base stands free in the
+    inflated map (``back_off`` shortens it itself); when it stopped inside the inflation
+    (a holistic stand-off beside the blocker), the line behind may stay blocked only for
+    :data:`BACK_OFF_EXEMPT` and then only as far as it stays free (``back_off`` does not
+    check a line from a blocked start: the base ran into a shelf's side panel so)."""
+    base = ctx.robot.base
+    if base is None or ctx.robot.occupancy is None:
+        return distance
+    cm = costmap(ctx)
+    p = base.state().pose
+    if cm.is_free(p.x, p.y):
+        return distance
+    step, d, free, was_free = 0.5 * cm.resolution, 0.0, 0.0, False
+    c, s = math.cos(p.theta), math.sin(p.theta)
+    while d < distance:
+        d = min(distance, d + step)
+        ok = cm.is_free(p.x - d * c, p.y - d * s)
+        if not ok and (was_free or d > BACK_OFF_EXEMPT):
+            break
+        was_free |= ok
+        free = d
+    if free < distance:
+        ctx.emit("back_off_shortened", asked=round(distance, 3), used=round(free, 3), node=ctx.node_path)
+    return free
+
+
 def _pick_steps(ctx: SkillContext, t: ObjectTarget, algorithm: str | None, time_limit: float | None,
                 attempts: int | None) -> SkillGen:
     prof, arm = fetch_object_settings(ctx), arm_settings(ctx)
@@ -692,7 +724,7 @@ def _pick_steps(ctx: SkillContext, t: ObjectTarget, algorithm: str | None, time_
     ctx.emit("scene_update", op="attach", item=name, node=ctx.node_path)
     yield from execute(ctx, planned(ctx, line, "retract"), "retract")
     if ctx.robot.base is not None and prof.back_off > 0:
-        yield from back_off(ctx, prof.back_off)
+        yield from back_off(ctx, _back_off_distance(ctx, prof.back_off))
     yield from move_named(ctx, arm.carry, cfg=cfg)
     held, why = holding(ctx, arm.min_held_width)
     if not held:

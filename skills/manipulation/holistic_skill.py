@@ -268,6 +268,8 @@ def _emit_plan(ctx: SkillContext, res: HolisticResult, round_: int) -> None:
         Param("size", list, unit="m", doc="the object's box [x, y, z] (axes of the grasp frame), kept clear of"),
         Param("move_arm", bool, default=True, doc="move the arm to the pre-grasp at the end"),
         Param("timeout", float, unit="s", doc="navigation timeout (default: profile nav.timeout)"),
+        Param("enabled", bool, default=True, doc=(
+            "false: fail at once (PLANNING), as a mission without the holistic planner would (comparisons)")),
         *planner_params(),
     ],
     outputs=[
@@ -281,7 +283,7 @@ def _emit_plan(ctx: SkillContext, res: HolisticResult, round_: int) -> None:
 def holistic_standoff(ctx: SkillContext, point: list | None = None, grasp: str = "top", yaw: float | None = None,
                       frame: str | None = None, size: list | None = None, move_arm: bool = True,
                       timeout: float | None = None, algorithm: str | None = None, time_limit: float | None = None,
-                      attempts: int | None = None) -> SkillGen:
+                      attempts: int | None = None, enabled: bool = True) -> SkillGen:
     """Find where the base must stand to reach the pre-grasp of a grasp point with the
     holistic base + arm planner (the paper's three virtual joints and RRT*/RRT-Connect
     over the 9-D space), drive there with the arm stowed, re-plan the arm from the pose
@@ -290,7 +292,10 @@ def holistic_standoff(ctx: SkillContext, point: list | None = None, grasp: str =
     grasp point along the approach. PLANNING when no base pose reaches it ("no base pose
     within reach ...", with the counts at each filter) or no plan is found; PRECONDITION
     for a missing or malformed target; EXECUTION when the base or the arm fails to move.
-    Outputs the pose reached and planned, the arm's pre-grasp joints, the planning time."""
+    Outputs the pose reached and planned, the arm's pre-grasp joints, the planning time.
+    ``enabled`` false: PLANNING "holistic planner off" at once."""
+    if not enabled:
+        raise SkillFailure(FailureKind.PLANNING, "holistic planner off (enabled: false)")
     return (yield from with_arm_status(
         ctx, _holistic_standoff(ctx, point, grasp, yaw, frame, size, move_arm, timeout, algorithm, time_limit,
                                 attempts), "holistic stand-off"))
