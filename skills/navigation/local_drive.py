@@ -329,19 +329,12 @@ class LocalDrive:
         return now - self._t_best > dwa.stuck_time
 
     def _giving_way(self, circles: Circles, pose: Pose2D) -> bool:
-        """Someone is walking (tracked speed above the tracker's ``moving_speed``) within
-        the social layer's ``slow_gap`` of the base: whatever the base does now (slowing,
-        stopping while the filter holds it), it is giving way, not stuck. (Someone
-        standing still beside the base is not counted: waiting for them deadlocked with
-        the sim's people, who wait for the robot in turn; the stuck recovery, turning and
-        backing off, breaks that.)"""
-        people = circles.people
-        if not len(people):
-            return False
-        cfg = self.config.planner
-        gap = np.hypot(people.centres[:, 0] - pose.x, people.centres[:, 1] - pose.y) - people.radii - cfg.limits.radius
-        moving = np.hypot(people.velocities[:, 0], people.velocities[:, 1]) > cfg.tracking.moving_speed
-        return bool(np.any(moving & (gap < cfg.social.slow_gap)))
+        """Someone known as a person (walking, or standing after having walked) is within
+        the social layer's ``slow_gap`` of the base and the patience with them is not
+        spent: whatever the base does now (slowing, stopping while the filter holds it),
+        it is giving way, not stuck (:meth:`LocalPlanner.giving_way`; once spent, the
+        recoveries count and re-plans go round whoever stands there)."""
+        return self.planner.giving_way(circles, pose, self.ctx.clock.now())
 
     def _goal_guarded(self) -> float | None:
         """The goal's distance [m] to the nearest non-person circle whose safety zone (its

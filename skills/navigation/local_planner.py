@@ -47,13 +47,15 @@ from mmexec.skills.navigation.obstacles import (
     detect_obstacles,
     scan_to_map,
 )
-from mmexec.skills.navigation.social import SocialConfig, speed_scale
+from mmexec.skills.navigation.social import PeopleWait, SocialConfig, speed_scale
 from mmexec.skills.navigation.tracks import ObstacleTracker, TrackingConfig
 
 __all__ = ["LocalCommand", "LocalPlanner", "LocalPlannerConfig", "barrier_fields"]
 
 #: [m] how far along the heading, each way, :meth:`LocalPlanner.escape_room` looks
 ESCAPE_LOOK = 0.3
+#: [m/s] a base commanded at most this fast is waiting (:meth:`LocalPlanner.giving_way`)
+WAIT_SPEED = 0.05
 
 
 def barrier_fields(f: CbfResult | None, circles: Circles, pose: Pose2D, v_meas: float) -> dict[str, Any]:
@@ -172,6 +174,7 @@ class LocalPlanner:
         self._tracks = Circles()
         self._t_tracks = 0.0
         self._u: tuple[float, float] | None = None
+        self.people_wait = PeopleWait(cfg.social)
 
     def set_path(self, path: list[tuple[float, float]], now: float) -> None:
         """Follow a global path (map points [m]) from clock time ``now`` [s]."""
@@ -201,9 +204,22 @@ class LocalPlanner:
         marks and the non-person circles (as discs of their covering radius plus the
         filter's look-ahead, so that the inflated map keeps the planned path out of the
         zone the filter guards; plus ``widen`` [m], to leave out a gap the base could not
-        pass)."""
-        c = self.circles_at(now).select(~self._tracks.person)
+        pass). People are left out (they move on), except, once the wait for them is
+        spent (:meth:`giving_way`), those standing still: the re-plan goes round them."""
+        c = self.circles_at(now)
+        keep = ~c.person
+        if self.people_wait.spent:
+            keep |= np.hypot(c.velocities[:, 0], c.velocities[:, 1]) <= self.config.tracking.moving_speed
+        c = c.select(keep)
         return self.costmap.merged_grid(c.centres, c.radii + self.config.cbf.lookahead + widen)
+
+    def giving_way(self, circles: Circles, pose: Pose2D, now: float) -> bool:
+        """Whether the base, not making progress at ``pose`` at clock time ``now`` [s], is
+        waiting for people (``circles``' people within the social layer's ``slow_gap``,
+        moving or standing) with patience left (:class:`~mmexec.skills.navigation.social.PeopleWait`):
+        the drive does not count that as being stuck."""
+        standing = self._u is None or abs(self._u[0]) <= WAIT_SPEED
+        return self.people_wait.update(circles.people, (pose.x, pose.y), now, standing)
 
     def escape_room(self, pose: Pose2D) -> tuple[float, float]:
         """The speeds [m/s] ``(back, ahead)`` from which the base, moving straight along

@@ -10,6 +10,14 @@ distance minus the person's covering radius minus the robot radius) from the ful
 at ``slow_gap`` to ``min_scale`` of it at ``stop_gap`` and below. A person is never
 approached at full speed, and the robot still creeps past one in a corridor.
 
+Waiting for people (:class:`PeopleWait`): while someone the tracker knows as a person
+(moving, or standing after having moved) is within ``slow_gap`` of the base, the base is
+giving way, not stuck: people move on (a person who stops in the way, at a viewpoint or
+by the goal, walks on within seconds; the sim's people turn round after 3 s). The
+patience is bounded: after ``patience`` seconds of people near the base in one stretch
+the wait is spent, the drive's stuck recovery counts again, and its re-plans go round
+the people standing there (:meth:`mmexec.skills.navigation.local_planner.LocalPlanner.replan_grid`).
+
 Frames: ``map``; metres, seconds. The cost is dimensionless (the DWA weighs it).
 """
 
@@ -22,14 +30,15 @@ import numpy as np
 from mmexec.skills.navigation.checks import non_negative, positive
 from mmexec.skills.navigation.obstacles import Circles
 
-__all__ = ["SocialConfig", "social_cost", "speed_scale"]
+__all__ = ["PeopleWait", "SocialConfig", "social_cost", "speed_scale"]
 
 
 @dataclass(frozen=True)
 class SocialConfig:
     """``amplitude`` (cost at a person's centre, >= 0), ``sigma`` [m], ``cutoff`` [sigmas];
     speed scaling: full speed at a gap of ``slow_gap`` [m] or more, ``min_scale`` (0-1)
-    of it at ``stop_gap`` [m] or less; ``robot_radius`` [m]."""
+    of it at ``stop_gap`` [m] or less; ``robot_radius`` [m]; ``patience`` [s], how long
+    the base waits for people near it in one stretch (:class:`PeopleWait`)."""
 
     amplitude: float = 1.0
     sigma: float = 0.5
@@ -38,9 +47,10 @@ class SocialConfig:
     stop_gap: float = 0.3
     min_scale: float = 0.3
     robot_radius: float = 0.178
+    patience: float = 10.0
 
     def validate(self) -> list[str]:
-        errs = non_negative(self, "amplitude") + positive(self, "sigma", "cutoff")
+        errs = non_negative(self, "amplitude", "patience") + positive(self, "sigma", "cutoff")
         if not 0 <= self.stop_gap < self.slow_gap:
             errs.append(f"need 0 <= stop_gap < slow_gap, got {self.stop_gap} and {self.slow_gap}")
         if not 0 < self.min_scale <= 1:
@@ -71,3 +81,41 @@ def speed_scale(position: tuple[float, float], people: Circles, config: SocialCo
     gap = float(np.min(d - people.radii)) - config.robot_radius
     frac = (gap - config.stop_gap) / (config.slow_gap - config.stop_gap)
     return float(min(1.0, max(config.min_scale, config.min_scale + (1.0 - config.min_scale) * frac)))
+
+
+class PeopleWait:
+    """Bounded patience with people near the base (see the module docstring): call
+    :meth:`update` once per tick; :attr:`spent` once the patience ran out in the current
+    stretch (it stays spent until nobody is within ``slow_gap``)."""
+
+    #: [s] a tick longer than this (the clock stood, the drive paused) counts as this
+    MAX_STEP = 0.5
+
+    def __init__(self, config: SocialConfig) -> None:
+        self.config = config
+        self.waited = 0.0  #: [s] waited in the current stretch
+        self._last: float | None = None
+
+    @property
+    def spent(self) -> bool:
+        return self.waited > self.config.patience
+
+    def update(self, people: Circles, position: tuple[float, float], now: float, standing: bool = True) -> bool:
+        """True while the base should wait for ``people`` (tracked people, ``map``) near
+        ``position`` [m] at clock time ``now`` [s]: someone within ``slow_gap`` and the
+        patience not yet spent. Only time the base spends ``standing`` (or creeping) is
+        counted against the patience."""
+        dt = 0.0 if self._last is None else min(max(now - self._last, 0.0), self.MAX_STEP)
+        self._last = now
+        cfg = self.config
+        if len(people):
+            d = np.hypot(people.centres[:, 0] - position[0], people.centres[:, 1] - position[1])
+            near = bool(np.any(d - people.radii - cfg.robot_radius < cfg.slow_gap))
+        else:
+            near = False
+        if not near:
+            self.waited = 0.0
+            return False
+        if standing:
+            self.waited += dt
+        return not self.spent

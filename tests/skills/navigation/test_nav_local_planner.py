@@ -120,3 +120,25 @@ def test_a_person_who_keeps_the_sims_distance_leaves_h_positive():
     enforced barrier stays >= 0 and the base is not pushed back."""
     hs, xs, escapes = _stand_off_a_person(3.0 + 0.178 + 0.3 + 0.2, wall_behind=False)
     assert min(hs) >= 0.0 and escapes == 0 and min(xs) >= 3.0 - 1e-9
+
+
+def test_replans_go_round_people_standing_once_the_wait_is_spent():
+    from mmexec.skills.navigation.obstacles import Circles
+    planner = LocalPlanner(_room(), LocalPlannerConfig.for_base(LOCOBOT_KOBUKI, MARGIN))
+    planner.observe(cast_scan(_room(), START, np.zeros((0, 2)), np.zeros(0), stamp=0.0), START)
+    standing, walking = np.array([[2.5, 4.0]]), np.array([[3.5, 4.0]])   # within the window round START
+    planner._tracks = Circles(np.vstack([standing, walking]), np.full(2, 0.2), np.full(2, 0.43),
+                              np.array([[0.0, 0.0], [0.8, 0.0]]), np.arange(2), np.ones(2, dtype=bool))
+
+    def occupied(grid, xy):
+        col, row = int(xy[0] / grid.resolution), int(xy[1] / grid.resolution)
+        return grid.data[row, col] >= 50
+
+    g = planner.replan_grid(0.0)
+    assert not occupied(g, standing[0]) and not occupied(g, walking[0])
+    t = 0.0
+    while planner.giving_way(planner.circles_at(t), Pose2D(2.5, 3.2, 0.0), t):
+        t += 0.05
+    assert t == pytest.approx(planner.config.social.patience, abs=0.1)
+    g = planner.replan_grid(0.0)
+    assert occupied(g, standing[0]) and not occupied(g, walking[0])

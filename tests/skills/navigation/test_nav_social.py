@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mmexec.skills.navigation.obstacles import Circles
-from mmexec.skills.navigation.social import SocialConfig, social_cost, speed_scale
+from mmexec.skills.navigation.social import PeopleWait, SocialConfig, social_cost, speed_scale
 
 
 def _people(centres, radius=0.2):
@@ -64,3 +64,26 @@ def test_speed_scale_falls_linearly_with_the_gap():
 def test_social_config_validation():
     assert SocialConfig().validate() == []
     assert len(SocialConfig(sigma=0.0, stop_gap=2.0, min_scale=0.0).validate()) == 3
+
+
+def test_the_wait_for_people_is_bounded():
+    """Someone within slow_gap: the base waits (standing time only) until the patience is
+    spent; it stays spent while they stay; a stretch without anyone near starts afresh."""
+    cfg = SocialConfig(slow_gap=1.2, robot_radius=0.2, patience=3.0)
+    wait = PeopleWait(cfg)
+    near, far = _people([[1.0, 0.0]]), _people([[5.0, 0.0]])
+    t = 0.0
+    assert not wait.update(far, (0.0, 0.0), t)
+    answers = []
+    for _ in range(80):                               # 4 s at 20 Hz with someone 0.6 m away
+        t += 0.05
+        answers.append(wait.update(near, (0.0, 0.0), t))
+    assert all(answers[:59]) and not any(answers[61:]) and wait.spent
+    assert not wait.update(far, (0.0, 0.0), t + 0.05) and not wait.spent
+    # driving past people does not use the patience up
+    for _ in range(200):
+        t += 0.05
+        assert wait.update(near, (0.0, 0.0), t, standing=False)
+    assert wait.waited == 0.0
+    # a clock that stood still for a while counts as one short step
+    assert wait.update(near, (0.0, 0.0), t + 30.0) and wait.waited == PeopleWait.MAX_STEP
