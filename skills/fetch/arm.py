@@ -73,6 +73,10 @@ HELD_CLEARANCE = 0.005
 #: (the basket wall, the robot's own body) and is then dropped from a little higher.
 PLACE_RAISES = (0.0, 0.05, 0.10)
 
+#: An attached item whose longest side is at least this many times its next longest is
+#: *elongated* (a screwdriver, pliers, a pen; not a box or a can).
+ELONGATED = 2.0
+
 #: Releases at the place pose before place gives up on an item that stays in the gripper:
 #: after each release and retract the fingers close to stow; closing on something means the
 #: released item came along (caught on the fingers), so it is taken back down and let go again.
@@ -254,14 +258,32 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     candidates = [(raise_by, place_poses(T_am @ _raised(T_map_place, raise_by), ws.kin.approach_axis,
                                          retract=prof.place_retract, grasp_height=prof.grasp_height))
                   for raise_by in PLACE_RAISES]
-    q, seeds, boxes = measured_joints(ctx), ik_seeds(ctx, ws, candidates[0][1].place), ctx.robot.scene
+    q = measured_joints(ctx)
+    item = ws.scene.items.get(name)
+    if item is not None and item.attached and _stood_up(item.size, item.T, candidates[0][1].place):
+        # the nominal pose would stand the elongated item on end (a top-grasped tool on the
+        # UR, whose carry holds it lying across the fingers): release it lying, from above
+        # (only where the arm can also retract from it: the WX250s reaches a top-down
+        # release over the basket but cannot rise from it holding the tool vertical)
+        T_tool = ws.kin.fk(q)
+        top_down = [(raise_by, td) for raise_by, nominal in candidates
+                    for td in _top_down(T_tool, item.T, (T_am @ _raised(T_map_place, raise_by))[:3, 3],
+                                        nominal.retract[:3, 3] - nominal.place[:3, 3], ws.kin.approach_axis)]
+        candidates = top_down + candidates
+    else:
+        top_down = []
+    seeds, boxes = ik_seeds(ctx, ws, candidates[0][1].place), ctx.robot.scene
     chosen: list[tuple[float, PlacePoses]] = []
 
     def plan_place() -> PlanResult:
         ws.scene.set_static_boxes(boxes, T_am)
         res = None
-        for cand in candidates:
+        for i, cand in enumerate(candidates):
             res = ws.planner.plan_to_pose(q, cand[1].place, ik_seeds=seeds, config=cfg)
+            if res.success and i < len(top_down) and res.path:
+                back = ws.planner.cartesian_path(res.path[-1], cand[1].retract, config=cfg)
+                if not back.success:
+                    res = PlanResult(False, f"no retract from it ({back.reason})")
             if res.success:
                 chosen.append(cand)
                 break
@@ -274,6 +296,8 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     raised, poses = chosen[0]
     if raised > 0:
         ctx.emit("place_raised", by=raised, node=ctx.node_path)
+    if any(poses is td for _, td in top_down):
+        ctx.emit("place_from_above", item=name, node=ctx.node_path)
     yield from execute(ctx, res, "place pose")
     held, why = holding(ctx, arm.min_held_width)
     if not held:  # dropped on the way (the gripper says so): releasing would report a delivery that is not
@@ -339,6 +363,49 @@ def _rolled(T: np.ndarray, approach_axis: int, angle: float) -> np.ndarray:
     R = np.eye(4)
     R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
     return T @ R
+
+
+def _stood_up(size: Sequence[float], T_tool_item: np.ndarray, T_place: np.ndarray) -> bool:
+    """Whether an attached item of box ``size`` [m] held at ``T_tool_item`` is elongated
+    (:data:`ELONGATED`) and the tool pose ``T_place`` (arm base, z up) turns its longest
+    side within 45 degrees of the vertical."""
+    k = int(np.argmax(size))
+    rest = sorted(float(v) for v in size)[:2]
+    if float(size[k]) < ELONGATED * rest[1]:
+        return False
+    return abs(float((T_place[:3, :3] @ T_tool_item[:3, k])[2])) > math.cos(math.radians(45.0))
+
+
+def _top_down(T_tool: np.ndarray, T_tool_item: np.ndarray, centre: np.ndarray, lift: np.ndarray,
+              approach_axis: int) -> list[PlacePoses]:
+    """Release poses (arm base, z up) with the tool's approach pointing straight down: the
+    current tool orientation ``T_tool`` tilted the shortest way until its approach is
+    vertical (an item lying across the fingers stays lying), then turned about the
+    vertical by 0, 90, -90 and 180 degrees; each placed so the held item's centre
+    (``T_tool_item``) is at ``centre`` [m], and retracted by ``lift`` [m]."""
+    a = T_tool[:3, approach_axis]
+    down = np.array([0.0, 0.0, -1.0])
+    axis = np.cross(a, down)
+    s, c = float(np.linalg.norm(axis)), float(a @ down)
+    if s > 1e-9:
+        K = _skew(axis / s)
+    else:  # pointing straight down already (no tilt), or straight up (half a turn)
+        K = _skew(T_tool[:3, (approach_axis + 1) % 3]) if c < 0.0 else np.zeros((3, 3))
+    R_tilt = np.eye(3) + s * K + (1.0 - c) * K @ K
+    out = []
+    for yaw in (0.0, math.pi / 2, -math.pi / 2, math.pi):
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        R = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]]) @ R_tilt @ T_tool[:3, :3]
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, centre - R @ T_tool_item[:3, 3]
+        T_r = T.copy()
+        T_r[:3, 3] += lift
+        out.append(PlacePoses(T, T_r))
+    return out
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
 def _plan_again(ws: ArmWorkspace, q: list[float], T: np.ndarray, cfg: PlannerConfig) -> PlanResult:
