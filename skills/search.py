@@ -13,6 +13,16 @@ looks at each of those pan angles, at the head's home tilt, before the base turn
 head turn is cheaper than a base turn (no braking, no odometry drift), so the base can step
 by more; the head is back at its home pose when the search ends, however it ends. World model: :class:`SearchProgress` of the latest search under
 ``search.progress``.
+
+**People in the way** (with ``nav.local_planner``: the lidar's tracked people,
+:class:`~mmexec.skills.navigation.local_planner.LocalPlanner`): a view whose camera cone
+holds a tracked person within :data:`OCCLUSION_RANGE` is not taken as a look at what is
+behind them. When the marker is not seen there, the search waits for the cone to clear
+(at most :data:`OCCLUSION_WAIT` clock seconds, the base standing, the lidar still
+tracking) and looks again (``search_occluded``). When every location has been searched
+without finding the marker and some view was still blocked by people after the wait,
+the search goes over its locations once more (``search_second_pass``) before it fails: people walk in
+front of shelves and go.
 """
 
 from __future__ import annotations
@@ -22,6 +32,8 @@ import math
 from collections.abc import Generator
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.skills.base import (
@@ -35,7 +47,14 @@ from mmexec.skills.base import (
     wait_goal,
 )
 from mmexec.skills.manipulation.arm import arm_settings, move_named
-from mmexec.skills.navigation.navigate import drive_path, rotate_by
+from mmexec.skills.navigation.local_drive import local_planner
+from mmexec.skills.navigation.local_planner import LocalPlanner
+from mmexec.skills.navigation.navigate import (
+    drive_path,
+    local_drive_config,
+    nav_settings,
+    rotate_by,
+)
 from mmexec.skills.perception.detect import camera_settings, look
 from mmexec.skills.poses import base_pose, pose_list
 from mmexec.skills.primitives import brake
@@ -46,6 +65,12 @@ __all__ = ["WORLD_SEARCH", "SearchProgress", "SearchSettings", "search", "search
 log = logging.getLogger(__name__)
 
 WORLD_SEARCH = "search.progress"
+
+#: [m] a tracked person closer than this to the camera, inside its view cone, hides what
+#: the view should show (the shelves stand within 2.5 m of the search locations)
+OCCLUSION_RANGE = 3.0
+#: [s] how long a view waits for the people in its cone to move on before it counts
+OCCLUSION_WAIT = 6.0
 
 
 @dataclass(frozen=True)
@@ -73,6 +98,8 @@ class SearchProgress:
     views: int = 0
     locations_visited: int = 0
     found_at: tuple[float, float, float] | None = None
+    occluded: int = 0  #: views with people in the camera cone when first looked at
+    hidden: int = 0  #: of those, views still blocked after :data:`OCCLUSION_WAIT`
 
 
 def _locations(ctx: SkillContext, given: list[Any] | None) -> list[tuple[Pose2D, str]]:
@@ -158,6 +185,7 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
         locs = locs[:max(0, max_locations)]
     progress = SearchProgress(marker)
     ctx.world[WORLD_SEARCH] = progress
+    watch = _PeopleWatch.for_search(ctx)
     base = ctx.robot.base
     assert base is not None
     deadline = ctx.clock.now() + timeout
@@ -171,12 +199,12 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
     pans = _head_views(ctx, prof.head_pans)
     if pans == [None]:
         return (yield from _search_stops(ctx, marker, stops, skipped, progress, n_steps, step_deg, settle_s,
-                                         n_frames, deadline, timeout, pans))
+                                         n_frames, deadline, timeout, pans, watch))
     head = ctx.robot.head
     assert head is not None
     try:
         found = yield from _search_stops(ctx, marker, stops, skipped, progress, n_steps, step_deg, settle_s,
-                                         n_frames, deadline, timeout, pans)
+                                         n_frames, deadline, timeout, pans, watch)
     except BaseException:
         head.point(*head.home)  # not waited for: the search failed or was cancelled
         raise
@@ -184,10 +212,129 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
     return found
 
 
+class _PeopleWatch:
+    """The lidar's tracked people, kept up to date while the search stands and turns,
+    and whether they stand in the camera's view (module docstring)."""
+
+    def __init__(self, ctx: SkillContext, planner: LocalPlanner) -> None:
+        self.ctx, self.planner = ctx, planner
+        self._stamp = -math.inf
+
+    @classmethod
+    def for_search(cls, ctx: SkillContext) -> _PeopleWatch | None:
+        """A watch with the run's local planner; None without ``nav.local_planner`` or a
+        lidar (no people are tracked then)."""
+        base, lidar = ctx.robot.base, ctx.robot.lidar
+        if base is None or lidar is None or ctx.robot.occupancy is None or not nav_settings(ctx).local_planner:
+            return None
+        return cls(ctx, local_planner(ctx, local_drive_config(ctx, base, None).planner))
+
+    def observe(self) -> None:
+        """Feed the lidar's newest scan, when it is new, to the tracks."""
+        lidar, base = self.ctx.robot.lidar, self.ctx.robot.base
+        assert lidar is not None and base is not None
+        scan = lidar.scan()
+        if scan is not None and scan.stamp > self._stamp:
+            self._stamp = scan.stamp
+            self.planner.observe(scan, base.state().pose)
+
+    def in_view(self) -> int:
+        """How many tracked people stand in the camera's horizontal view cone within
+        :data:`OCCLUSION_RANGE` of it now."""
+        cam, base = self.ctx.robot.camera, self.ctx.robot.base
+        assert cam is not None and base is not None
+        people = self.planner.circles_at(self.ctx.clock.now()).people
+        if not len(people):
+            return 0
+        T = base.state().pose.matrix() @ cam.pose_in_base()
+        cx, cy = T[0, 3], T[1, 3]
+        yaw = math.atan2(T[1, 2], T[0, 2])  # the optical axis (z) in map
+        k = cam.intrinsics
+        half = math.atan2(0.5 * k.width, k.fx)
+        d = np.hypot(people.centres[:, 0] - cx, people.centres[:, 1] - cy)
+        bearing = np.arctan2(people.centres[:, 1] - cy, people.centres[:, 0] - cx) - yaw
+        off = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing)))
+        widen = np.arcsin(np.clip(people.radii / np.maximum(d, 1e-6), 0.0, 1.0))
+        return int(np.count_nonzero((d < OCCLUSION_RANGE) & (off < half + widen)))
+
+
+def _observed(gen: Generator[None, None, Any], watch: _PeopleWatch | None) -> Generator[None, None, Any]:
+    """Run the motion ``gen`` (a turn, a settle) tick by tick, feeding each new lidar scan
+    to the tracks between its ticks (people are told from furniture by how they move, so
+    the tracks need every scan, not one per view); exceptions thrown in (a cancel) go to
+    ``gen``. Returns what ``gen`` returns."""
+    if watch is None:
+        return (yield from gen)
+    try:
+        gen.send(None)
+        while True:
+            try:
+                yield
+            except GeneratorExit:
+                gen.close()
+                raise
+            except BaseException as e:  # noqa: BLE001 - a cancel (SkillCancelled is one): the motion brakes and re-raises
+                gen.throw(e)
+            else:
+                watch.observe()
+                gen.send(None)
+    except StopIteration as stop:
+        return stop.value
+
+
+def _wait_for_view(ctx: SkillContext, watch: _PeopleWatch, progress: SearchProgress) -> Generator[None, None, bool]:
+    """People stand in the view: wait (base stopped, scans tracked) until the cone is
+    clear or :data:`OCCLUSION_WAIT` has passed. True when it cleared."""
+    base = ctx.robot.base
+    assert base is not None
+    progress.occluded += 1
+    t0 = ctx.clock.now()
+    people = watch.in_view()
+    while ctx.clock.now() - t0 < OCCLUSION_WAIT:
+        base.stop()
+        yield
+        watch.observe()
+        if not watch.in_view():
+            break
+    cleared = not watch.in_view()
+    progress.hidden += not cleared
+    ctx.emit("search_occluded", marker=progress.marker, view=progress.views, people=people,
+             waited=round(ctx.clock.now() - t0, 2), cleared=cleared, node=ctx.node_path)
+    return cleared
+
+
 def _search_stops(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str] | None], skipped: list[str],
                   progress: SearchProgress, n_steps: int, step_deg: float, settle_s: float, n_frames: int,
-                  deadline: float, timeout: float, pans: list[float | None]) -> SkillGen:
-    """The search's stops, turns and views (see :func:`search`)."""
+                  deadline: float, timeout: float, pans: list[float | None], watch: _PeopleWatch | None) -> SkillGen:
+    """The search's stops, turns and views (see :func:`search`), then, when people stood
+    in the way of a view, a second pass over the locations."""
+    found = yield from _search_pass(ctx, marker, stops, skipped, progress, n_steps, step_deg, settle_s, n_frames,
+                                    deadline, timeout, pans, watch)
+    if found is not None:
+        return found
+    again = [s for s in stops if s is not None]
+    if watch is not None and progress.hidden and again:
+        ctx.emit("search_second_pass", marker=marker, views=progress.views, occluded=progress.occluded,
+                 locations=len(again), node=ctx.node_path)
+        log.info("search: marker %d not found with people in %d views: searching the %d locations again", marker,
+                 progress.occluded, len(again))
+        skipped.clear()
+        found = yield from _search_pass(ctx, marker, again, skipped, progress, n_steps, step_deg, settle_s, n_frames,
+                                        deadline, timeout, pans, watch)
+        if found is not None:
+            return found
+    unreachable = f" ({len(skipped)} unreachable: {', '.join(skipped)})" if skipped else ""
+    people = f"; people in the way of {progress.occluded} views" if progress.occluded else ""
+    raise SkillFailure(FailureKind.EXECUTION,
+                       f"marker {marker} not found: {progress.views} views at {progress.locations_visited + 1} locations"
+                       + unreachable + people)
+
+
+def _search_pass(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str] | None], skipped: list[str],
+                 progress: SearchProgress, n_steps: int, step_deg: float, settle_s: float, n_frames: int,
+                 deadline: float, timeout: float, pans: list[float | None],
+                 watch: _PeopleWatch | None) -> Generator[None, None, dict[str, Any] | None]:
+    """One pass over ``stops``: the found outputs, or None."""
     base = ctx.robot.base
     assert base is not None
     for stop in stops:
@@ -207,8 +354,8 @@ def _search_stops(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str]
             if k > 0:
                 if step_deg * k >= 360.0 - 1e-6:
                     break  # a full turn looks at the first view again
-                yield from rotate_by(ctx, -math.radians(step_deg))
-            yield from _settle(ctx, settle_s)
+                yield from _observed(rotate_by(ctx, -math.radians(step_deg)), watch)
+            yield from _observed(_settle(ctx, settle_s), watch)
             for pan in pans:
                 if pan is not None:
                     head = ctx.robot.head
@@ -216,6 +363,11 @@ def _search_stops(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str]
                     yield from _point_head(ctx, pan, head.home[1], settle_s)
                 progress.views += 1
                 est = yield from look(ctx, marker, n_frames)
+                if est is None and watch is not None:
+                    watch.observe()
+                    if watch.in_view() and (yield from _wait_for_view(ctx, watch, progress)):
+                        yield from _observed(_settle(ctx, settle_s), watch)
+                        est = yield from look(ctx, marker, n_frames)
                 if est is not None:
                     p = base.state().pose
                     progress.found_at = (p.x, p.y, p.theta)
@@ -226,9 +378,6 @@ def _search_stops(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str]
                 if ctx.clock.now() > deadline:
                     raise SkillFailure(FailureKind.EXECUTION,
                                        f"search: marker {marker} not found within {timeout:g} s ({progress.views} views)")
-    unreachable = f" ({len(skipped)} unreachable: {', '.join(skipped)})" if skipped else ""
-    raise SkillFailure(FailureKind.EXECUTION,
-                       f"marker {marker} not found: {progress.views} views at {progress.locations_visited + 1} locations"
-                       + unreachable)
+    return None
 
 
