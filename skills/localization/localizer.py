@@ -342,11 +342,35 @@ class Localizer:
         off = math.hypot(fix.pose[0] - est.x, fix.pose[1] - est.y)
         turn = abs(wrap_angle(float(fix.pose[2]) - est.theta))
         if off > s.lost_distance or turn > s.lost_angle:
+            at_fix = self._scan_fit(scan, Pose2D(*map(float, fix.pose)))
+            at_est = self._scan_fit(scan, est)
+            if at_fix is not None and at_est is not None and at_fix <= at_est:
+                # a wrong triangle (people hiding posts, a bright body taken for one):
+                # the scan fits the map no better there than at the estimate
+                log.info("localization: a reflector fix %.2f m / %.2f rad from the estimate, but the scan fits the "
+                         "map no better there (%.0f %% against %.0f %%): not re-seeding", off, turn, 100 * at_fix,
+                         100 * at_est)
+                return
             log.warning("localization: the reflectors put the base %.2f m / %.2f rad from the estimate while it "
                         "stands; re-seeding the filter at (%.2f, %.2f, %.2f)", off, turn, *map(float, fix.pose))
             pf.initialise(fix.pose, (s.initial_sigma[0], s.initial_sigma[1]))
             self.reseeds += 1
             self._last_fix = None
+
+    def _scan_fit(self, scan: LaserScan, pose: Pose2D) -> float | None:
+        """The share of the scan's beams the map explains (within ``fit_distance``) with
+        the base at map ``pose``; None with too few returns to judge."""
+        pf = self.filter
+        assert pf is not None
+        r, a = pf.field.beam_subset(np.asarray(scan.ranges, dtype=np.float64),
+                                    np.asarray(scan.angles, dtype=np.float64), scan.range_max)
+        if len(r) < 10:
+            return None  # too few returns to judge (a dropout, an open space)
+        mx, my, myaw = pf.mount
+        bx, by = mx + r * np.cos(a + myaw), my + r * np.sin(a + myaw)
+        c, s = math.cos(pose.theta), math.sin(pose.theta)
+        d = pf.field.distance_at(pose.x + c * bx - s * by, pose.y + s * bx + c * by)
+        return float(np.mean(d <= self.settings.fit_distance))
 
     def _watch_fit(self, scan: LaserScan, odom: Pose2D) -> None:
         """Average the share of beams the map explains at the estimate (:attr:`fit`) and
@@ -354,15 +378,9 @@ class Localizer:
         pf = self.filter
         assert pf is not None
         est = _apply(pf.map_to_odom(), odom)
-        r, a = pf.field.beam_subset(np.asarray(scan.ranges, dtype=np.float64),
-                                    np.asarray(scan.angles, dtype=np.float64), scan.range_max)
-        if len(r) < 10:
-            return  # too few returns to judge (a dropout, an open space)
-        mx, my, myaw = pf.mount
-        bx, by = mx + r * np.cos(a + myaw), my + r * np.sin(a + myaw)
-        c, s = math.cos(est.theta), math.sin(est.theta)
-        d = pf.field.distance_at(est.x + c * bx - s * by, est.y + s * bx + c * by)
-        share = float(np.mean(d <= self.settings.fit_distance))
+        share = self._scan_fit(scan, est)
+        if share is None:
+            return
         self.fit = 0.5 * self.fit + 0.5 * share
         lost_fit = self.settings.lost_fit
         if not self.lost and self.fit < lost_fit:

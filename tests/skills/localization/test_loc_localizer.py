@@ -231,6 +231,23 @@ def test_a_kidnap_while_standing_is_caught_by_the_reflectors_and_the_filter_rese
     assert d < 0.1 and h < 0.1 and robot.base.state().localised
 
 
+def test_a_wrong_reflector_fix_at_rest_is_not_taken_when_the_scan_fits_the_map_worse_there(monkeypatch) -> None:
+    """Two agreeing reflector fixes far from the estimate re-seed the filter only when
+    the scan fits the map better there: a wrong triangle (people hiding posts in the
+    crowd campaigns put a standing LoCoBot 2-5 m off, outside the lab) is refused."""
+    import mmexec.skills.localization.localizer as loc
+    from mmexec.skills.localization.reflectors import ReflectorFix
+
+    robot, inner = _wrapped()
+    _drive(robot, 0.3, 0.2, 2.0)
+    _drive(robot, 0.0, 0.0, 1.0)
+    monkeypatch.setattr(loc, "fix_from_scan", lambda *a, **k: ReflectorFix(np.array([1.0, 3.4, 2.0]), (0, 1, 2), (), 0.0))
+    _drive(robot, 0.0, 0.0, 3.5)
+    assert robot.localizer.reseeds == 0
+    d, h = _error(robot, inner)
+    assert d < 0.1 and h < 0.1 and robot.base.state().localised
+
+
 def test_a_kidnap_while_driving_without_reflectors_is_lost_and_not_localised() -> None:
     # (an exact ray caster in an exact map: beams within 5 cm of the map count; in a plain
     # rectangle a lost pose still puts a third of the beams near some wall)
