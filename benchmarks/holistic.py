@@ -234,7 +234,8 @@ class Outcome:
 
 #: The dense search a failure is re-run with: 10 x the goal candidates, no navigation
 #: tolerance, 3 attempts (does the query have a solution at all?)
-DENSE = HolisticConfig(goal_candidates=3000, goal_count=6, attempts=3, tolerance=(0.0, 0.0), time_limit=2.0)
+DENSE = HolisticConfig(goal_candidates=3000, goal_count=6, attempts=3, tolerance=(0.0, 0.0), drive_margin=(0.0, 0.0),
+                       time_limit=2.0)
 
 
 def _arrive_and_replan(model: HolisticModel, planner: HolisticPlanner, arm: ArmPlanner, robot: Robot, q: Query,

@@ -77,6 +77,7 @@ from mmexec.skills.manipulation.arm import (
     with_arm_status,
     workspace,
 )
+from mmexec.skills.manipulation.holistic import back_off_distance
 from mmexec.skills.manipulation.holistic_skill import holistic_seed
 from mmexec.skills.navigation import find_standoff, simplify_path
 from mmexec.skills.navigation.navigate import (
@@ -297,7 +298,9 @@ def _record(ctx: SkillContext, t: ObjectTarget, where: str) -> None:
     outputs=[Output("centre", list, doc="[x, y, z] of the object's centre of mass in map [m]"),
              Output("place", str, doc="where it was found (a place name or search_locations[i])"),
              Output("grasp", str, doc="the item's grasp: top or front (catalogue, else the profile's)"),
-             Output("size", list, doc="the item's size [m] (catalogue)")],
+             Output("size", list, doc="the item's size [m] (catalogue)"),
+             Output("back_off", float, doc=(
+                 "how far [m] pick_object backs off before its carry posture (profile fetch_object.back_off)"))],
     needs=("base", "camera"),
 )
 def find_object(ctx: SkillContext, item: str, timeout: float = 400.0) -> SkillGen:
@@ -339,7 +342,7 @@ def find_object(ctx: SkillContext, item: str, timeout: float = 400.0) -> SkillGe
                 ctx.emit("object_found", item=it.name, place=stop.name, likely=stop.likely, views=views,
                          node=ctx.node_path)
                 return {"centre": [float(v) for v in t.centre], "place": stop.name,
-                        "grasp": _grasp_mode(prof, it)[0], "size": list(it.size)}
+                        "grasp": _grasp_mode(prof, it)[0], "size": list(it.size), "back_off": prof.back_off}
             if ctx.clock.now() > deadline:
                 raise SkillFailure(FailureKind.EXECUTION, f"{it.name} not found within {timeout:g} s ({views} views)")
     unreachable = f" ({len(skipped)} unreachable: {', '.join(skipped)})" if skipped else ""
@@ -625,17 +628,12 @@ def _object_box(t: ObjectTarget) -> tuple[np.ndarray, tuple[float, float, float]
     return T, (g.footprint[0], g.footprint[1], g.height)
 
 
-#: [m] how far a base that stopped inside the inflated map may back off before the line
-#: behind it must be free (two cells of the lab maps, as the holistic planner's start)
-BACK_OFF_EXEMPT = 0.10
-
-
 def _back_off_distance(ctx: SkillContext, distance: float) -> float:
     """How far to back off from here: ``distance`` [m] when the base stands free in the
     inflated map (``back_off`` shortens it itself); when it stopped inside the inflation
-    (a holistic stand-off beside the blocker), the line behind may stay blocked only for
-    :data:`BACK_OFF_EXEMPT` and then only as far as it stays free (``back_off`` does not
-    check a line from a blocked start: the base ran into a shelf's side panel so)."""
+    (a holistic stand-off beside the blocker) as :func:`back_off_distance` allows, as the
+    holistic planner assumed (``back_off`` checks no line from a blocked start: the base
+    ran into a shelf's side panel so)."""
     base = ctx.robot.base
     if base is None or ctx.robot.occupancy is None:
         return distance
@@ -643,15 +641,7 @@ def _back_off_distance(ctx: SkillContext, distance: float) -> float:
     p = base.state().pose
     if cm.is_free(p.x, p.y):
         return distance
-    step, d, free, was_free = 0.5 * cm.resolution, 0.0, 0.0, False
-    c, s = math.cos(p.theta), math.sin(p.theta)
-    while d < distance:
-        d = min(distance, d + step)
-        ok = cm.is_free(p.x - d * c, p.y - d * s)
-        if not ok and (was_free or d > BACK_OFF_EXEMPT):
-            break
-        was_free |= ok
-        free = d
+    free = back_off_distance(cm, p, distance)
     if free < distance:
         ctx.emit("back_off_shortened", asked=round(distance, 3), used=round(free, 3), node=ctx.node_path)
     return free

@@ -86,6 +86,7 @@ __all__ = [
     "HolisticPlanner",
     "HolisticResult",
     "armbase_in_map",
+    "back_off_distance",
     "replan_arm",
 ]
 
@@ -98,6 +99,13 @@ BASE_JOINTS = ("base_x", "base_y", "base_yaw")
 #: collision to the drive posture (a few mrad of tracking error on a stow posture that
 #: nearly touches the robot itself, e.g. the LoCoBot's fingers by its arm base).
 ESCAPE_LIMIT = 0.06
+
+#: scene item name of the carried object while a goal's carry posture is checked
+CARRY_ITEM = "holistic_carried"
+#: [m] per side the carried object's box is grown by in that check: a held object sags
+#: a few mm in the fingers and its estimate is off by as much (a box carried 1 mm above
+#: a 0.2 m blocker in the model rested on it in the sim)
+CARRY_MARGIN = 0.02
 
 #: [m] waypoint spacing and [rad] largest joint step of the straight pre-grasp -> grasp
 #: line a goal must allow (the arm planner's ``cartesian_path`` defaults, which the pick uses)
@@ -199,6 +207,28 @@ def armbase_in_map(base: Pose2D, mount: Sequence[float]) -> np.ndarray:
     T[:2, :2] = ((c, -s), (s, c))
     T[:3, 3] = (base.x + c * mount[0] - s * mount[1], base.y + s * mount[0] + c * mount[1], mount[2])
     return T
+
+
+#: [m] how far a base that stopped inside the inflated map may back off before the line
+#: behind it must be free (two cells of the lab maps, as :meth:`HolisticPlanner.plan`'s start)
+BACK_OFF_EXEMPT = 0.10
+
+
+def back_off_distance(cm: CostMap, pose: Pose2D, distance: float) -> float:
+    """How far [m] a base at ``pose`` (``map``) can back straight off, up to ``distance``:
+    from a free pose as far as the line behind stays free in the inflated map ``cm``; from
+    a pose inside the inflation (a holistic stand-off beside the blocker) the line may stay
+    blocked for :data:`BACK_OFF_EXEMPT`, then only as far as it stays free."""
+    step, d, free, was_free = 0.5 * cm.resolution, 0.0, 0.0, cm.is_free(pose.x, pose.y)
+    c, s = math.cos(pose.theta), math.sin(pose.theta)
+    while d < distance:
+        d = min(distance, d + step)
+        ok = cm.is_free(pose.x - d * c, pose.y - d * s)
+        if not ok and (was_free or d > BACK_OFF_EXEMPT):
+            break
+        was_free |= ok
+        free = d
+    return free
 
 
 def _cells(cm: CostMap, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -372,6 +402,8 @@ class HolisticPlanner:
         if errs:
             raise ValueError("HolisticConfig: " + "; ".join(errs))
         self.stop = threading.Event()
+        #: (carry posture, object size, back-off [m]) while a plan() checks the carried object
+        self._carry: tuple[np.ndarray, tuple[float, ...], float] | None = None
 
     # ------------------------------------------------------------------ goals
     def _candidates(self, start: Pose2D, target: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -479,6 +511,8 @@ class HolisticPlanner:
                 qg = self._approach(T_am @ T_map_pre, T_am @ T_map_grasp, q[i], free_rotation)
                 if qg is None or float(np.max(np.abs(qg - q[i]))) > cfg.max_grasp_jump:
                     continue
+                if self._carry is not None and not self._carry_clear(bx, by, byaw, qg, T_map_grasp, cfg):
+                    continue
             if not self._tolerant(bx, by, byaw, q[i], stow, T_map_pre, free_rotation, cfg):
                 continue
             if not self.drive_clear(bx, by, byaw, stow, cfg.drive_margin):
@@ -505,6 +539,25 @@ class HolisticPlanner:
                 return None
             q = qn
         return q
+
+    def _carry_clear(self, x: float, y: float, yaw: float, q_grasp: np.ndarray, T_map_grasp: np.ndarray,
+                     cfg: HolisticConfig) -> bool:
+        """The object (a box of the carry size at the grasp frame, grown by
+        :data:`CARRY_MARGIN` per side), held at ``q_grasp``, and the arm in the carry
+        posture are free with the base within ``drive_margin`` of the goal ``(x, y, yaw)``
+        backed off as the pick will (:func:`back_off_distance`; :meth:`drive_clear` with
+        the object attached)."""
+        assert self._carry is not None
+        q_carry, size, back = self._carry
+        sc = self.model.scene
+        sc.place_root(x, y, yaw)
+        sc.add_item(CARRY_ITEM, tuple(v + 2.0 * CARRY_MARGIN for v in size), T_map_grasp)
+        d = back_off_distance(self.model.costmap, Pose2D(x, y, yaw), back) if back > 0 else 0.0
+        try:
+            sc.attach_item(CARRY_ITEM, q_grasp)
+            return self.drive_clear(x - d * math.cos(yaw), y - d * math.sin(yaw), yaw, q_carry, cfg.drive_margin)
+        finally:
+            sc.remove_item(CARRY_ITEM)
 
     def _tolerant(self, x: float, y: float, yaw: float, q: np.ndarray, stow: np.ndarray, T_map_pre: np.ndarray,
                   free_rotation: bool, cfg: HolisticConfig) -> bool:
@@ -569,13 +622,20 @@ class HolisticPlanner:
     def plan(self, start: Pose2D, q_start: Sequence[float], T_map_pre: np.ndarray, *,
              T_map_grasp: np.ndarray | None = None, seeds: Sequence[Sequence[float]] = (),
              q_drive: Sequence[float] | None = None, free_approach_rotation: bool = False,
-             config: HolisticConfig | None = None) -> HolisticResult:
+             config: HolisticConfig | None = None, q_carry: Sequence[float] | None = None,
+             carry_size: Sequence[float] | None = None, back_off: float = 0.0) -> HolisticResult:
         """Plan the robot from base pose ``start`` (``map``) and arm joints ``q_start``
         [rad] until the tool is at ``T_map_pre`` (4x4 in ``map``, the pre-grasp). With
         ``T_map_grasp`` a goal also needs the grasp's IK near it. ``seeds``: arm postures
         that start the goal IK (turned towards the target), e.g. the profile's reach
         pose. ``q_drive``: the arm posture the base drives in (default ``q_start``), which
-        must be free at the goal's base pose too. A start a little inside the inflated
+        must be free at the goal's base pose too. ``q_carry`` and ``carry_size``: the
+        posture the arm carries the object in after the pick and the object's box [m] in
+        the axes of the grasp frame (``T_map_grasp``): held at the grasp, it must be free
+        in that posture within ``drive_margin`` of where the base stands when the arm
+        goes there: the goal backed off by ``back_off`` [m] as far as the map allows
+        (:func:`back_off_distance`; the pick backs off first), since the object hangs below
+        the gripper and over a low blocker it can rest on it. A start a little inside the inflated
         map's obstacles (within 2 cells) may leave them. The scene must have been
         :meth:`HolisticModel.prepare`-d; it is left with the robot placed anywhere (call
         :meth:`HolisticModel.release`)."""
@@ -601,11 +661,15 @@ class HolisticPlanner:
         # the scene checks) may leave it: the footprint test spares its surroundings
         m.exempt = None if m.footprint_free(np.array([start.x]), np.array([start.y]))[0] else \
             (start.x, start.y, 2.0 * m.costmap.resolution)
+        if q_carry is not None and carry_size is not None and T_map_grasp is not None:
+            self._carry = (np.clip(np.asarray(q_carry, dtype=float), lo[3:], hi[3:]),
+                           tuple(float(v) for v in carry_size), float(back_off))
         try:
             return self._plan(start, state0, q0, drive, target, lo, hi, T_map_pre, T_map_grasp, seeds,
                               free_approach_rotation, cfg, rng, t0, checks0)
         finally:
             m.exempt = None
+            self._carry = None
 
     def _plan(self, start: Pose2D, state0: np.ndarray, q0: np.ndarray, drive: np.ndarray, target: np.ndarray,
               lo: np.ndarray, hi: np.ndarray, T_map_pre: np.ndarray, T_map_grasp: np.ndarray | None,

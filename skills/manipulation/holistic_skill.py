@@ -186,11 +186,13 @@ def _frame_from_world(ctx: SkillContext, key: str, kind: str) -> np.ndarray:
 def _plan_job(ws: ArmWorkspace, model: HolisticModel, planner: HolisticPlanner, boxes: Sequence[Any],
               item: tuple[tuple[float, float, float], np.ndarray] | None, start: Pose2D, q0: list[float],
               stow: list[float], T_pre: np.ndarray, T_grasp: np.ndarray, seeds: list[list[float]],
-              cfg: HolisticConfig) -> HolisticResult:
+              cfg: HolisticConfig, carry: tuple[list[float], tuple[float, float, float], float] | None) -> HolisticResult:
     """(worker thread) The holistic plan over the arm workspace's scene, left at home."""
     model.prepare(boxes, {TARGET_ITEM: item} if item is not None else None)
     try:
-        return planner.plan(start, q0, T_pre, T_map_grasp=T_grasp, seeds=seeds, q_drive=stow, config=cfg)
+        return planner.plan(start, q0, T_pre, T_map_grasp=T_grasp, seeds=seeds, q_drive=stow, config=cfg,
+                            q_carry=carry[0] if carry else None, carry_size=carry[1] if carry else None,
+                            back_off=carry[2] if carry else 0.0)
     finally:
         model.release()
 
@@ -266,6 +268,11 @@ def _emit_plan(ctx: SkillContext, res: HolisticResult, round_: int) -> None:
             "world-model key of the grasp frame instead of point/yaw: a 4x4 in map, an object with "
             "T_map_top / T_map_front (a perception grasp point) or holding one as 'grasp' (fetch_object.target)")),
         Param("size", list, unit="m", doc="the object's box [x, y, z] (axes of the grasp frame), kept clear of"),
+        Param("object_size", list, unit="m", doc=(
+            "the object's size [length, width, height] (the catalogue's, z up): held in the profile's arm.carry "
+            "posture, it must clear everything at the goal too")),
+        Param("back_off", float, default=0.0, unit="m", doc=(
+            "how far the pick that follows backs off before the carry posture (object_size's check is made there)")),
         Param("move_arm", bool, default=True, doc="move the arm to the pre-grasp at the end"),
         Param("timeout", float, unit="s", doc="navigation timeout (default: profile nav.timeout)"),
         Param("enabled", bool, default=True, doc=(
@@ -283,7 +290,8 @@ def _emit_plan(ctx: SkillContext, res: HolisticResult, round_: int) -> None:
 def holistic_standoff(ctx: SkillContext, point: list | None = None, grasp: str = "top", yaw: float | None = None,
                       frame: str | None = None, size: list | None = None, move_arm: bool = True,
                       timeout: float | None = None, algorithm: str | None = None, time_limit: float | None = None,
-                      attempts: int | None = None, enabled: bool = True) -> SkillGen:
+                      attempts: int | None = None, enabled: bool = True, object_size: list | None = None,
+                      back_off: float = 0.0) -> SkillGen:
     """Find where the base must stand to reach the pre-grasp of a grasp point with the
     holistic base + arm planner (the paper's three virtual joints and RRT*/RRT-Connect
     over the 9-D space), drive there with the arm stowed, re-plan the arm from the pose
@@ -298,7 +306,7 @@ def holistic_standoff(ctx: SkillContext, point: list | None = None, grasp: str =
         raise SkillFailure(FailureKind.PLANNING, "holistic planner off (enabled: false)")
     return (yield from with_arm_status(
         ctx, _holistic_standoff(ctx, point, grasp, yaw, frame, size, move_arm, timeout, algorithm, time_limit,
-                                attempts), "holistic stand-off"))
+                                attempts, object_size, back_off), "holistic stand-off"))
 
 
 def _target(ctx: SkillContext, point: list | None, grasp: str, yaw: float | None, frame: str | None) -> np.ndarray:
@@ -322,7 +330,8 @@ def _target(ctx: SkillContext, point: list | None, grasp: str, yaw: float | None
 
 def _holistic_standoff(ctx: SkillContext, point: list | None, grasp: str, yaw: float | None, frame: str | None,
                        size: list | None, move_arm: bool, timeout: float | None, algorithm: str | None,
-                       time_limit: float | None, attempts: int | None) -> Generator[None, None, dict[str, Any]]:
+                       time_limit: float | None, attempts: int | None,
+                       object_size: list | None = None, back_off: float = 0.0) -> Generator[None, None, dict[str, Any]]:
     T_grasp_frame = _target(ctx, point, grasp, yaw, frame)
     ctx.world.pop(WORLD_HOLISTIC_ARM, None)
     item = None
@@ -330,7 +339,17 @@ def _holistic_standoff(ctx: SkillContext, point: list | None, grasp: str, yaw: f
         if len(size) != 3 or not all(isinstance(v, (int, float)) and v > 0 for v in size):
             raise SkillFailure(FailureKind.PRECONDITION, f"holistic_standoff: 'size' must be 3 lengths > 0 m, got {size!r}")
         item = (tuple(float(v) for v in size), T_grasp_frame)
+    carry = None
+    if object_size is not None:
+        if len(object_size) != 3 or not all(isinstance(v, (int, float)) and v > 0 for v in object_size):
+            raise SkillFailure(FailureKind.PRECONDITION,
+                               f"holistic_standoff: 'object_size' must be 3 lengths > 0 m, got {object_size!r}")
+        w, h = float(max(object_size[0], object_size[1])), float(object_size[2])
+        # the grasp frame's up axis: z for a top grasp, y for a front grasp
+        carry_box = (w, w, h) if grasp == "top" else (w, h, w)
     settings, arm = holistic_settings(ctx), arm_settings(ctx)
+    if object_size is not None and arm.carry:
+        carry = (arm_joints(ctx.profile, arm.carry, "holistic_standoff"), carry_box, max(0.0, back_off))
     cfg = settings.config(algorithm, time_limit, attempts)
     ws = workspace(ctx)
     description = ctx.robot.description
@@ -353,7 +372,7 @@ def _holistic_standoff(ctx: SkillContext, point: list | None, grasp: str, yaw: f
     for round_ in range(2):
         start, q0 = base.state().pose, measured_joints(ctx)
         res = yield from off_tick(ctx, ws, lambda s=start, q=q0: _plan_job(
-            ws, model, planner, boxes, item, s, q, stow, poses.pre_grasp, poses.grasp, seeds, cfg))
+            ws, model, planner, boxes, item, s, q, stow, poses.pre_grasp, poses.grasp, seeds, cfg, carry))
         _emit_plan(ctx, res, round_)
         if not res.success or res.base_pose is None or res.arm is None:
             raise SkillFailure(FailureKind.PLANNING, f"holistic plan: {res.reason}")

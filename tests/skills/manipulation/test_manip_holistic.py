@@ -21,6 +21,7 @@ from mmexec.skills.manipulation.holistic import (
     HolisticModel,
     HolisticPlanner,
     armbase_in_map,
+    replan_arm,
 )
 from mmexec.skills.manipulation.kinematics import ur5e, wx250s
 from mmexec.skills.navigation.astar import plan_path
@@ -129,6 +130,14 @@ def test_blocked_front_query_solved(model, lab):
     assert np.allclose(T[:3, :3], poses.pre_grasp[:3, :3], atol=1e-2)
     assert model.is_valid(state)
     assert model.arm_valid(b.x, b.y, b.theta, TUCK)
+    # the stowed arm stays free with the base anywhere within the drive margin of the goal
+    assert planner.drive_clear(b.x, b.y, b.theta, TUCK, planner.config.drive_margin)
+    # the straight pre-grasp -> grasp line has IK without jumps, as the pick will move it
+    T_am = np.linalg.inv(armbase_in_map(b, DESC.arm_mount))
+    model.arm_valid(b.x, b.y, b.theta, res.arm)
+    qg = planner._approach(T_am @ poses.pre_grasp, T_am @ poses.grasp, np.asarray(res.arm), False)
+    assert qg is not None
+    assert np.linalg.norm(wx250s().fk(qg)[:3, 3] - (T_am @ poses.grasp)[:3, 3]) < 1e-3
     # the 9-D path starts at the start and ends at the goal, every state valid
     assert res.path[0][:3] == pytest.approx((start.x, start.y, start.theta))
     assert res.path[-1] == pytest.approx(state)
@@ -168,6 +177,50 @@ def test_unsolvable_queries_fail_with_a_reason(model, lab):
     assert not res.success and res.reason == "cancelled"
     model.release()
     model.prepare(world.scene_boxes())
+
+
+def test_drive_margin_keeps_the_stowed_arm_off_the_wall(model):
+    """drive_clear: the stowed arm free at the pose is not enough when the base may stop
+    6 cm closer to the wall; farther out it is clear all round; (0, 0) checks the pose only."""
+    planner = HolisticPlanner(model)
+    x, yaw = 1.2, -math.pi / 2  # facing the south wall
+    ys = np.arange(0.60, 0.05, -0.005)
+    y0 = next(float(y) for y in ys if not model.arm_valid(x, float(y), yaw, TUCK)) + 0.005  # the last free one
+    assert model.arm_valid(x, y0, yaw, TUCK)
+    assert planner.drive_clear(x, y0, yaw, TUCK, (0.0, 0.0))
+    assert not planner.drive_clear(x, y0, yaw, TUCK, (0.06, 0.06))
+    assert not planner.drive_clear(x, y0 + 0.04, yaw, TUCK, (0.06, 0.0))
+    assert planner.drive_clear(x, y0 + 0.07, yaw, TUCK, (0.06, 0.06))
+    model.release()
+
+
+def test_replan_arm_escapes_a_start_a_little_in_collision():
+    """The measured stow posture a few hundredths of a rad off (the tuck's open fingers
+    into the arm base link) is left by a short move to the stow posture when that is free;
+    farther off, or without the stow posture, it stays a start in collision."""
+    from mmexec.skills.manipulation.planner import ArmPlanner, PlannerConfig
+    from mmexec.skills.manipulation.scene import ArmModel, PlanningScene
+
+    with PlanningScene(ArmModel.from_description(DESC)) as scene:
+        arm = ArmPlanner(scene, wx250s(), PlannerConfig(seed=0))
+        reached = Pose2D(2.0, 2.0, 0.0)
+        T_pre = armbase_in_map(reached, DESC.arm_mount) @ wx250s().fk((0.0, 0.2, 0.2, 0.0, 0.6, 0.0))
+        off = np.array(TUCK)
+        off[1] += 0.04  # shoulder: the fingers into the arm base link
+        assert not scene.is_valid(off) and scene.is_valid(TUCK)
+        plain = replan_arm(arm, reached, DESC.arm_mount, off, T_pre, [])
+        assert not plain.success and plain.reason.startswith("start in collision")
+        res = replan_arm(arm, reached, DESC.arm_mount, off, T_pre, [], q_escape=TUCK)
+        assert res.success, res.reason
+        assert res.path[0] == pytest.approx(tuple(off)) and res.path[1] == pytest.approx(TUCK)
+        traj = res.trajectory
+        assert traj is not None and traj.positions[-1] == pytest.approx(res.path[-1])
+        assert any(np.allclose(p, TUCK, atol=1e-6) for p in traj.positions)  # through the stow posture
+        far = np.array(TUCK)
+        far[1] += 0.10
+        assert not scene.is_valid(far)
+        res = replan_arm(arm, reached, DESC.arm_mount, far, T_pre, [], q_escape=TUCK)
+        assert not res.success and res.reason.startswith("start in collision")
 
 
 @pytest.mark.parametrize("kin", [wx250s(), ur5e()], ids=["wx250s", "ur5e"])
