@@ -218,16 +218,16 @@ def back_off_distance(cm: CostMap, pose: Pose2D, distance: float) -> float:
     """How far [m] a base at ``pose`` (``map``) can back straight off, up to ``distance``:
     from a free pose as far as the line behind stays free in the inflated map ``cm``; from
     a pose inside the inflation (a holistic stand-off beside the blocker) the line may stay
-    blocked for :data:`BACK_OFF_EXEMPT`, then only as far as it stays free."""
+    blocked for :data:`BACK_OFF_EXEMPT` (0 when it is still blocked there: backing
+    further into an obstacle), then only as far as it stays free."""
     step, d, free, was_free = 0.5 * cm.resolution, 0.0, 0.0, cm.is_free(pose.x, pose.y)
     c, s = math.cos(pose.theta), math.sin(pose.theta)
     while d < distance:
         d = min(distance, d + step)
-        ok = cm.is_free(pose.x - d * c, pose.y - d * s)
-        if not ok and (was_free or d > BACK_OFF_EXEMPT):
+        if cm.is_free(pose.x - d * c, pose.y - d * s):
+            was_free, free = True, d
+        elif was_free or d > BACK_OFF_EXEMPT:
             break
-        was_free |= ok
-        free = d
     return free
 
 

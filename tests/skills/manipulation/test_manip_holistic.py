@@ -194,6 +194,50 @@ def test_drive_margin_keeps_the_stowed_arm_off_the_wall(model):
     model.release()
 
 
+def test_back_off_distance(lab):
+    """Straight back as far as the inflated map stays free; from a pose inside the
+    inflation only out of it (10 cm blind at most), never further in."""
+    from mmexec.skills.manipulation.holistic import back_off_distance
+
+    _world, cm, _ = lab
+    assert back_off_distance(cm, Pose2D(2.5, 2.0, 0.0), 0.3) == pytest.approx(0.3)
+    # facing north 0.45 m from the south wall: backing towards it stops at the inflation
+    d = back_off_distance(cm, Pose2D(1.2, 0.45, math.pi / 2), 0.3)
+    assert 0.1 < d < 0.25 and cm.is_free(1.2, 0.45 - d) and not cm.is_free(1.2, 0.45 - d - 0.05)
+    # inside the inflation by the wall: facing it, backing out is allowed; facing away, nothing
+    assert not cm.is_free(1.2, 0.19)
+    assert back_off_distance(cm, Pose2D(1.2, 0.19, -math.pi / 2), 0.3) == pytest.approx(0.3)
+    assert back_off_distance(cm, Pose2D(1.2, 0.19, math.pi / 2), 0.3) == 0.0
+
+
+def test_the_carried_object_must_clear_a_low_blocker(model, lab):
+    """A goal facing the 0.2 m blocker holds the carried box (8 cm high) on it in the carry
+    posture; turned away the same base position is clear; without the object it is clear."""
+    world, _cm, T_marker = lab
+    planner = HolisticPlanner(model)
+    blocker = next(o for o in world.obstacles if o.name == "blocker")
+    n = T_marker[:3, 2]
+    bx, by = blocker.pose[0] + 0.45 * n[0], blocker.pose[1] + 0.45 * n[1]
+    facing = math.atan2(-n[1], -n[0])
+    carry = np.array([0.0, -0.2, 0.6, 0.0, 0.5, 0.0])  # config/locobot_sim.yaml's carry pose
+    q_grasp = np.array(HOME)
+    model.arm_valid(bx, by, facing, q_grasp)
+    T_grasp = model.tool_pose((bx, by, facing, *q_grasp))
+    cfg = HolisticConfig(drive_margin=(0.0, 0.0))
+    try:
+        planner._carry = (carry, (0.05, 0.08, 0.05), 0.0)
+        assert planner.drive_clear(bx, by, facing, carry, (0.0, 0.0))  # the arm alone clears it
+        assert not planner._carry_clear(bx, by, facing, q_grasp, T_grasp, cfg)
+        away = facing + math.pi
+        model.arm_valid(bx, by, away, q_grasp)
+        assert planner._carry_clear(bx, by, away, q_grasp, model.tool_pose((bx, by, away, *q_grasp)), cfg)
+        assert "holistic_carried" not in model.scene.items
+    finally:
+        planner._carry = None
+        model.release()
+        model.prepare(world.scene_boxes())
+
+
 def test_replan_arm_escapes_a_start_a_little_in_collision():
     """The measured stow posture a few hundredths of a rad off (the tuck's open fingers
     into the arm base link) is left by a short move to the stow posture when that is free;
