@@ -457,8 +457,9 @@ def locate_object(ctx: SkillContext, frames: int | None = None) -> SkillGen:
     image, not cut by its edge; the head goes home afterwards, or for a dangerous item
     after ``mark_dangerous`` showed the operator this view): the pick plans from this
     closest view, ``frames`` predictions fused. EXECUTION "ITEM not seen from the
-    stand-off" when the view shows no such object (the pick would close on nothing where
-    the far estimate was off)."""
+    stand-off" when the aimed head's view shows no such object (the pick would close on
+    nothing where the far estimate was off); a camera that cannot be aimed leaves the
+    estimate the object was found with (logged, ``object_not_relocated``)."""
     t = _target(ctx, "locate_object")
     prof = fetch_object_settings(ctx)
     if prof.locate_pose is not None and ctx.robot.arm is not None:
@@ -477,9 +478,14 @@ def locate_object(ctx: SkillContext, frames: int | None = None) -> SkillGen:
     if near is None:
         ctx.emit("object_not_relocated", item=t.item.name, distance=round(t.distance, 3), aimed=aimed,
                  node=ctx.node_path)
-        raise SkillFailure(FailureKind.EXECUTION,
-                           f"{t.item.name} not seen from the stand-off (the head {'aimed at' if aimed else 'facing'} "
-                           f"its estimate {', '.join(f'{v:.2f}' for v in t.centre)} m)")
+        if aimed:
+            raise SkillFailure(FailureKind.EXECUTION, f"{t.item.name} not seen from the stand-off (the head aimed at "
+                               f"its estimate {', '.join(f'{v:.2f}' for v in t.centre)} m)")
+        # a camera that cannot be aimed (a wrist camera in locate_pose) may miss it from an
+        # angled stand-off: the pick goes on with the estimate it was found with
+        log.warning("%s not in view from its stand-off; the pick uses the estimate from %.2f m", t.item.name,
+                    t.distance)
+        return {"centre": [float(v) for v in t.centre]}
     _record(ctx, near, "stand-off")
     return {"centre": [float(v) for v in near.centre]}
 
