@@ -163,6 +163,7 @@ class RollingCostmap:
         self.pinned = np.zeros((self.n, self.n), dtype=bool)
         self._static_win = np.zeros((self.n, self.n))
         self.clearance = np.zeros((self.n, self.n))
+        self._marks_field: np.ndarray | None = None  # distance [m] to the nearest mark (None: no marks)
         self._placed = False
 
     # ------------------------------------------------------------------ geometry
@@ -256,8 +257,10 @@ class RollingCostmap:
         if self.marks.any():
             free = np.where(self.marks, 0, 255).astype(np.uint8)
             marks = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-            self.clearance = np.minimum(self._static_win, marks.astype(np.float64) * self.resolution)
+            self._marks_field = marks.astype(np.float64) * self.resolution
+            self.clearance = np.minimum(self._static_win, self._marks_field)
         else:
+            self._marks_field = None
             self.clearance = self._static_win.copy()
 
     def clear_marks(self) -> None:
@@ -292,6 +295,21 @@ class RollingCostmap:
         if not inside.all():
             out[~inside] = self.static.edge_distance(xy[~inside])
         return out
+
+    def clearance_over(self, static: StaticLayer, xy: np.ndarray) -> np.ndarray:
+        """As :meth:`clearance_at`, with another static layer in place of the map's own
+        (the same grid with fewer obstacles, e.g. only those that reach a held item's
+        height: :func:`mmexec.skills.navigation.carried.tall_layer`): the distance [m]
+        from each map point (xy (..., 2)) to the nearest obstacle cell's edge of
+        ``static`` or of the marks (what the lidar saw is taken to reach every height)."""
+        out = static.edge_distance(xy)
+        if self._marks_field is None:
+            return out
+        fr, fc = _cell_coords(self.grid, xy)
+        fr, fc = fr - self.r0, fc - self.c0
+        inside = (fr >= 0) & (fr < self.n) & (fc >= 0) & (fc < self.n)
+        marks = np.maximum(_bilinear(self._marks_field, fr, fc) - 0.5 * self.resolution, 0.0)
+        return np.where(inside, np.minimum(out, marks), out)
 
     def merged_grid(self, centres: np.ndarray | None = None, radii: np.ndarray | None = None) -> OccupancyGrid:
         """The static map with the current marks written in as occupied (100) cells, and

@@ -41,13 +41,31 @@ it, since what the bumper felt may be below the scan plane); back off; re-plan. 
 does a bumper that stays pressed while the base tries to back off (the Kobuki driver
 refuses motion while one is).
 
+**A held item** (:mod:`mmexec.skills.navigation.carried`): when the gripper holds
+something the arm carries out past the footprint, every command (the DWA's and docking's)
+is checked over the time the base needs to stop from it for sweeping the item into what
+reaches its height (the map less the robot's scene boxes lower than the item, and the
+lidar's marks); one that would stops the base, which turns to its path the way round
+that keeps the item clear. Turns in place (facing the path, the goal's heading, the
+recovery's turn) go the way that keeps it clear, backing off first when neither does.
+A planned path comes into the goal along its heading (or within 80 degrees of it) for
+the item's reach, so the item does not swing through what stands beside the stop (the
+lab's crate by the depot). Docking stopped by the item near the goal aligns there.
+
+**Pose jumps**: a localised pose that jumps between two ticks by more than the base's
+motion explains (``pose_jump``: a re-localisation after a kidnap) brakes the base,
+forgets the costmap's marks (placed from the old belief) and plans again from the new
+pose, at most ``jump_replans`` times a drive, as the plain drive does; a base that stops
+being localised fails the drive (EXECUTION "lost localisation ...").
+
 For the live console the drive publishes the path it follows under ``nav.path`` (a new
 list of ``[x, y]`` [m] each time it is planned; empty when the drive ends) and the tracked
 people under ``nav.people`` (``{"id", "x", "y", "vx", "vy"}`` in ``map`` [m, m/s]). Event
 log records: ``nav_plan`` (why, the path's points and length), ``nav_tick`` (each tick:
 estimated pose, the command sent and the DWA's, the smallest barrier value ``h`` [m^2]
 over the circles, how many barriers bound, the DWA status, the social speed scale, the
-tracked people), ``nav_recovery`` and ``nav_contact``.
+tracked people), ``nav_recovery``, ``nav_contact``, ``nav_item`` (what the held item
+made the drive do) and ``nav_replan`` (a pose jump).
 
 Frames: ``map``; m, rad, s. Nothing here reads the simulator's ground truth.
 """
@@ -64,9 +82,18 @@ from typing import Any
 import numpy as np
 
 from mmexec.drivers.geometry import wrap_angle
-from mmexec.drivers.interfaces import BLIND_FAULTS, Base, LaserScan, Lidar, OccupancyGrid, Pose2D
+from mmexec.drivers.interfaces import (
+    BLIND_FAULTS,
+    Base,
+    BaseState,
+    LaserScan,
+    Lidar,
+    OccupancyGrid,
+    Pose2D,
+)
 from mmexec.skills.base import FailureKind, SkillCancelled, SkillContext, SkillFailure
-from mmexec.skills.navigation.astar import plan_path, simplify_path
+from mmexec.skills.navigation.astar import line_is_free, plan_path, simplify_path
+from mmexec.skills.navigation.carried import ItemGuard, held_item, tall_layer
 from mmexec.skills.navigation.cbf import QpStatus
 from mmexec.skills.navigation.dwa import DwaStatus
 from mmexec.skills.navigation.grid import CostMap, inflate
@@ -115,6 +142,28 @@ FACE_PATH_DISTANCE = 0.3
 #: wider (:meth:`LocalPlanner.replan_grid`), so a gap the base stood in is left out when
 #: there is another way
 STUCK_WIDEN = 0.15
+#: ``ctx.world`` key: the static layer of the obstacles that reach a held item's height,
+#: with the map and the height it was built for (:func:`LocalDrive._item_guard`)
+WORLD_TALL_LAYER = "nav.tall_layer"
+#: [s] each command is checked for sweeping a held item into something over the time the
+#: base needs to stop from it plus this (two ticks and a half at 20 Hz)
+ITEM_HORIZON = 0.125
+#: [m] a dock whose next move would sweep the held item into something ends this close to
+#: the goal with the heading aligned (the item-safe way) instead of moving further
+ITEM_DOCK_NEAR = 0.08
+#: [s] the DWA drives this long before docking is tried again after the item stopped it
+ITEM_DOCK_PAUSE = 2.0
+#: [m] how far back a turn the item cannot make either way backs off before trying again
+ITEM_BACK_OFF = 0.15
+#: [m] with an item held, the path's last stretch runs straight into the goal for the
+#: item's reach past the footprint plus this (or a quarter of it where that has no room;
+#: :meth:`LocalDrive._approach_point`) ...
+ITEM_APPROACH = 0.2
+#: [rad] ... along the goal's heading turned by the first of these that keeps the item clear
+ITEM_APPROACH_TURNS = (0.0, 0.35, -0.35, 0.7, -0.7, 1.05, -1.05, 1.4, -1.4)
+#: [s] a pose jump is looked for between two poses at most this far apart (consecutive
+#: ticks of the DWA or docking; not across a turn or a back-off, whose motion is not logged)
+JUMP_WINDOW = 0.2
 #: [m] how far outside the filter's zone a moved goal lies beyond the look-ahead
 #: (:meth:`LocalDrive._leave_zones`): the barrier sits at the look-ahead point, so at a goal
 #: only ``l`` outside the zone the base could not turn towards the obstacle
@@ -132,7 +181,10 @@ class LocalDriveConfig:
     ``zone_goal_search`` [m] how far a goal inside the zone the filter guards round an
     obstacle the map does not show may move (0, the default: never; a search viewpoint a
     box stands on may move, a pick's stand-off or the depot stop may not); ``tracker`` the docking tracker's limits and tolerances, ``dock_distance`` [m] how
-    close to the goal docking starts."""
+    close to the goal docking starts; ``pose_jump`` ([m], [rad]): a pose change between
+    two ticks this much larger than the base's motion explains is the localiser
+    correcting the pose, and the path is planned again from the new pose, at most
+    ``jump_replans`` times in one drive."""
 
     planner: LocalPlannerConfig
     margin: float
@@ -144,6 +196,8 @@ class LocalDriveConfig:
     goal_search: float = 0.3
     zone_goal_search: float = 0.0
     dock_distance: float = 0.5
+    pose_jump: tuple[float, float] = (0.15, 0.15)
+    jump_replans: int = 3
 
 
 def local_planner(ctx: SkillContext, config: LocalPlannerConfig) -> LocalPlanner:
@@ -230,6 +284,11 @@ class LocalDrive:
         self._best, self._t_best = math.inf, ctx.clock.now()  # progress: least path length left, and when
         self._deadline = ctx.clock.now() + timeout
         self._people_shown = False
+        self._guard: ItemGuard | None = None  # set by run() when the gripper holds something
+        self._no_dock_until = -math.inf  # [s] docking paused (the held item stopped it)
+        self._prev: tuple[Pose2D, float, float, float] | None = None  # pose, v, w and clock of the last tick
+        self._jump = 0.0  # [m] the pose's change at the last tick
+        self.jump_replans = 0
 
     # ------------------------------------------------------------------ planning
     def _inflated(self, now: float, widen: float = 0.0) -> CostMap:
@@ -283,13 +342,47 @@ class LocalDrive:
             free = cm.nearest_free(gx, gy, self.config.goal_search)
             if free is not None:
                 gx, gy = free
-        grid_path = plan_path(cm, (start.x, start.y), (gx, gy)) if cm.is_free(gx, gy) else None
+        grid_path = None
+        pre = self._approach_point(cm, start, gx, gy)
+        if pre is not None:
+            grid_path = plan_path(cm, (start.x, start.y), pre)
+            if grid_path is not None:
+                grid_path = [*simplify_path(cm, grid_path), (gx, gy)]
+        if grid_path is None and cm.is_free(gx, gy):
+            grid_path = simplify_path(cm, plan_path(cm, (start.x, start.y), (gx, gy)) or []) or None
         if grid_path is None:
             if log_none:
                 self.ctx.emit("nav_plan", why=why, found=False, label=self.label, node=self.ctx.node_path)
             return None
-        grid_path = simplify_path(cm, grid_path)
         return [(start.x, start.y), *grid_path[1:-1], (gx, gy)] if len(grid_path) > 1 else [(gx, gy)]
+
+    def _approach_point(self, cm: CostMap, start: Pose2D, gx: float, gy: float) -> tuple[float, float] | None:
+        """With an item held out ahead: the point the path comes through so that its last
+        stretch runs straight into goal ``(gx, gy)`` along the goal's heading, or within
+        :data:`ITEM_APPROACH_TURNS` of it (the first of those that works), for the item's
+        reach past the footprint plus :data:`ITEM_APPROACH`, with the item clear of what
+        reaches its height all along the stretch and in the turn to the goal's heading
+        at its end, as a fork truck comes into a rack: arriving from the side, the turn
+        at the goal swings the item through whatever stands beside the stop (the lab's
+        crate by the depot). None without an item, when the base is already that near
+        the goal, or when no such stretch is free on ``cm``."""
+        guard = self._guard
+        if guard is None:
+            return None
+        reach = guard.item.reach - self.config.planner.limits.radius
+        if math.hypot(gx - start.x, gy - start.y) <= reach + ITEM_APPROACH:
+            return None
+        for d, delta in itertools.product((reach + ITEM_APPROACH, reach + ITEM_APPROACH / 4), ITEM_APPROACH_TURNS):
+            th = self.goal.theta + delta
+            px, py = gx - d * math.cos(th), gy - d * math.sin(th)
+            if not cm.is_free(px, py) or not line_is_free(cm, (px, py), (gx, gy)):
+                continue
+            f = np.linspace(0.0, 1.0, max(2, math.ceil(d / 0.05) + 1))
+            stretch = np.stack([px + f * (gx - px), py + f * (gy - py), np.full(f.size, th)], axis=1)
+            if float(guard.gaps(stretch).min()) < guard.margin or not guard.turn_clear(Pose2D(gx, gy, th), -delta):
+                continue
+            return px, py
+        return None
 
     def _follow_path(self, path: list[tuple[float, float]], why: str, now: float) -> None:
         """Follow ``path`` from now: published (``nav.path``) and logged (``nav_plan``)
@@ -437,6 +530,7 @@ class LocalDrive:
         ctx, base = self.ctx, self.base
         now = ctx.clock.now()
         self.planner.reset_command()
+        self._guard = self._item_guard()
         if self._given_path is not None:
             start, given = base.state().pose, self._given_path
             # a grid path runs between cell centres: from the base, to the goal exactly
@@ -479,19 +573,80 @@ class LocalDrive:
     def _timed_out(self, now: float) -> bool:
         return now > self._deadline
 
-    def _face_path(self) -> Generator[None, None, None]:
+    def _item_guard(self) -> ItemGuard | None:
+        """The guard of the item the gripper holds now (None: nothing held beyond the
+        footprint), over the static layer of what reaches its height (cached in the world
+        model per map and height, the height rounded down to 5 cm)."""
+        robot = self.ctx.robot
+        item = held_item(robot, self.config.planner.limits.radius)
+        if item is None or robot.occupancy is None:
+            return None
+        floor = math.floor(item.floor / 0.05) * 0.05
+        cached = self.ctx.world.get(WORLD_TALL_LAYER)
+        if cached is not None and cached[0] is robot.occupancy and cached[1] == floor:
+            layer = cached[2]
+        else:
+            cm = self.config.planner.costmap
+            layer = tall_layer(robot.occupancy, robot.scene, floor, occupied_threshold=cm.occupied_threshold,
+                               unknown_is_obstacle=cm.unknown_is_obstacle)
+            self.ctx.world[WORLD_TALL_LAYER] = (robot.occupancy, floor, layer)
+        log.info("%s: holding an item %.2f m out (%.2f m up and higher): the drive keeps it clear",
+                 self.label, item.reach, item.floor)
+        return ItemGuard(item, self.planner.costmap, layer)
+
+    # ------------------------------------------------------------------ pose jumps
+    def _jumped(self, st: BaseState, now: float) -> bool:
+        """Whether the localised pose jumped since the last tick (``pose_jump``: more than
+        the base's motion explains, e.g. a re-localisation after a kidnap), while
+        re-plans for jumps are left; EXECUTION failure when the base is no longer
+        localised."""
+        if not st.localised:
+            raise self._fail(FailureKind.EXECUTION, f"lost localisation on the way to {self.label}: the scans no "
+                             "longer match the map at the estimated pose (stopped; run 'localize')", "not localised")
+        prev, self._prev = self._prev, (st.pose, st.v, st.w, now)
+        if prev is None or self.jump_replans >= self.config.jump_replans:
+            return False
+        pose, v, w, t = prev
+        dt = max(now - t, 0.0)
+        if dt > JUMP_WINDOW:  # the drive turned or backed off in between: nothing to compare
+            return False
+        self._jump = pose.distance_to(st.pose)
+        moved = self._jump - max(abs(v), abs(st.v)) * dt
+        turned = abs(wrap_angle(st.pose.theta - pose.theta)) - max(abs(w), abs(st.w)) * dt
+        return moved > self.config.pose_jump[0] or turned > self.config.pose_jump[1]
+
+    def _after_jump(self, st: BaseState, now: float) -> Generator[None, None, None]:
+        """Brake and plan again from the new pose (``nav_replan``): the path was planned
+        from where the base was believed to be, and the costmap's marks were placed from
+        that belief too (forgotten: the next scans mark again)."""
+        self.jump_replans += 1
+        self.ctx.emit("nav_replan", label=self.label, reason="the localised pose jumped",
+                      jump=round(self._jump, 3), node=self.ctx.node_path)
+        log.info("%s: the localised pose jumped; planning again", self.label)
+        yield from brake(self.ctx, self.base)
+        self.planner.costmap.clear_marks()
+        self._restart_progress(self.ctx.clock.now())
+        self._replan(self.ctx.clock.now(), "pose jump")
+        self.planner.reset_command()
+        self._prev = None
+
+    def _face_path(self, *, force: bool = False) -> Generator[None, None, None]:
         """As the plain drive's tracker does: when the path leaves more than the tracker's
-        ``turn_in_place_angle`` off the base's heading, turn in place to it first. The DWA
+        ``turn_in_place_angle`` off the base's heading (``force``: more than the heading
+        tolerance), turn in place to it first. The DWA
         would turn while driving off, in an arc that swung the base half a metre off the
         path (after a pick, facing the shelf, with the path to the depot behind it), and
         the arm held out with it (into the lab's crate by the depot)."""
         pose = self.base.state().pose
         path = self._path or []
         ahead = next(((x, y) for x, y in path if math.hypot(x - pose.x, y - pose.y) > FACE_PATH_DISTANCE), None)
+        if ahead is None and force and math.hypot(self.goal.x - pose.x, self.goal.y - pose.y) > FACE_PATH_DISTANCE / 3:
+            ahead = (self.goal.x, self.goal.y)
         if ahead is None:
             return
         direction = math.atan2(ahead[1] - pose.y, ahead[0] - pose.x)
-        if abs(wrap_angle(direction - pose.theta)) > self.config.tracker.turn_in_place_angle:
+        limit = self.config.heading_tolerance if force else self.config.tracker.turn_in_place_angle
+        if abs(wrap_angle(direction - pose.theta)) > limit:
             yield from self._turn_to(direction)
             self.planner.reset_command()
 
@@ -513,7 +668,10 @@ class LocalDrive:
                 continue
             self._last_tick = now
             st = base.state()
-            if self._can_dock(st.pose):
+            if self._jumped(st, now):
+                yield from self._after_jump(st, now)
+                continue
+            if now >= self._no_dock_until and self._can_dock(st.pose):
                 if (yield from self._dock()):
                     return
                 continue
@@ -532,6 +690,14 @@ class LocalDrive:
                 self._t_best += dt  # waiting for someone walking by is no standstill
             elif self._stuck(cmd.dwa.remaining, now):
                 yield from self._recover("stuck: no progress along the path")
+                continue
+            if self._guard is not None and not self._guard.arc_clear(st.pose, cmd.v, cmd.w, self._item_horizon(cmd.v, cmd.w)):
+                # the DWA (which sees the footprint only) would sweep the held item into
+                # something: stop and turn to the path the way that keeps it clear
+                self._emit_item("stopped: the command would sweep the held item into something", st.pose)
+                yield from brake(ctx, base)
+                yield from self._face_path(force=True)
+                self.planner.reset_command()
                 continue
             base.set_velocity(cmd.v, cmd.w)
             yield
@@ -586,6 +752,9 @@ class LocalDrive:
                 continue
             last = now
             st = base.state()
+            if self._jumped(st, now):
+                yield from self._after_jump(st, now)
+                return False
             self._observe()
             if not self._way_clear(st.pose):
                 yield from brake(ctx, base)
@@ -603,6 +772,16 @@ class LocalDrive:
                               ref=_rounded([v, w]), **barrier_fields(f, circles, st.pose, st.v), active=int(f.active.sum()),
                               infeasible=f.status is QpStatus.INFEASIBLE, status="dock", circles=len(circles))
                 v, w = f.v, f.w
+            if self._guard is not None and not self._guard.arc_clear(st.pose, v, w, self._item_horizon(v, w)):
+                yield from brake(ctx, base)
+                if math.hypot(self.goal.x - st.pose.x, self.goal.y - st.pose.y) <= ITEM_DOCK_NEAR:
+                    # near enough: align the item-safe way rather than turn to creep the rest
+                    self._emit_item("docked short: the last move would sweep the held item into something", st.pose)
+                    return bool((yield from self._turn_to(self.goal.theta)))
+                self._emit_item("docking stopped: the next move would sweep the held item into something", st.pose)
+                self._no_dock_until = now + ITEM_DOCK_PAUSE
+                self.planner.reset_command()
+                return False
             if tracker.phase != phase:
                 phase, best, t_best = tracker.phase, math.inf, now
             progress = (abs(wrap_angle(self.goal.theta - st.pose.theta)) if phase == "align"
@@ -626,9 +805,63 @@ class LocalDrive:
     # ------------------------------------------------------------------ motions
     def _turn_to(self, target: float, *, rate: float | None = None) -> Generator[None, None, bool]:
         """Turn in place to heading ``target`` [rad] within the heading tolerance
-        (observing scans on the way); ``rate`` [rad/s] caps the turn rate. False when a
-        contact cut the turn short (the contact recovery ran)."""
-        return (yield from self._turn(lambda th: wrap_angle(target - th), rate))
+        (observing scans on the way); ``rate`` [rad/s] caps the turn rate. With an item
+        held, the turn goes the way round that keeps it clear (:meth:`_item_way`). False
+        when a contact cut the turn short (the contact recovery ran)."""
+        angle = yield from self._item_way(target)
+        return (yield from self._turn_by(angle, rate))
+
+    def _turn_by(self, angle: float, rate: float | None) -> Generator[None, None, bool]:
+        """Turn in place by ``angle`` [rad] (signed, counted as the base turns, so more
+        than half a turn goes the way asked); see :meth:`_turn`."""
+        turned, last = [0.0], [self.base.state().pose.theta]
+
+        def left(theta: float) -> float:
+            turned[0] += wrap_angle(theta - last[0])
+            last[0] = theta
+            return angle - turned[0]
+
+        return (yield from self._turn(left, rate))
+
+    def _item_way(self, target: float) -> Generator[None, None, float]:
+        """The signed turn [rad] to heading ``target``: the shorter way, or, with an item
+        held that the shorter way would sweep into something (:class:`ItemGuard`), the
+        longer way when that keeps it clear; when neither does, back off up to
+        :data:`ITEM_BACK_OFF` where there is room and look again; failing that the
+        shorter way (logged ``nav_item``)."""
+        guard = self._guard
+        angle = wrap_angle(target - self.base.state().pose.theta)
+        if guard is None or abs(angle) <= self.config.heading_tolerance:
+            return angle
+        for attempt in range(2):
+            pose = self.base.state().pose
+            angle = wrap_angle(target - pose.theta)
+            if guard.turn_clear(pose, angle):
+                return angle
+            other = angle - math.copysign(2.0 * math.pi, angle)
+            if guard.turn_clear(pose, other):
+                self._emit_item("turn the other way round", pose)
+                return other
+            room = self._room_behind(pose, ITEM_BACK_OFF) if attempt == 0 else 0.0
+            if room <= 0.02:
+                break
+            self._emit_item(f"back off {room:.2f} m to turn", pose)
+            yield from self._back_off(room)
+        pose = self.base.state().pose
+        self._emit_item("the turn sweeps the held item into something either way", pose)
+        log.warning("%s: turning to %.2f rad sweeps the held item into something either way", self.label, target)
+        return wrap_angle(target - pose.theta)
+
+    def _item_horizon(self, v: float, w: float) -> float:
+        """[s] how far ahead command ``(v, w)`` is checked for the held item: the time the
+        base needs to stop from it at its accelerations, plus :data:`ITEM_HORIZON`."""
+        lim = self.config.planner.limits
+        return max(abs(v) / lim.accel_v, abs(w) / lim.accel_w) + ITEM_HORIZON
+
+    def _emit_item(self, what: str, pose: Pose2D) -> None:
+        """Log what the held item made the drive do (``nav_item``)."""
+        self.ctx.emit("nav_item", what=what, label=self.label, pose=_rounded([pose.x, pose.y, pose.theta]),
+                      node=self.ctx.node_path)
 
     def _turn(self, error: Callable[[float], float], rate: float | None) -> Generator[None, None, bool]:
         """Turn in place until ``error(theta)`` [rad] is within the heading tolerance: the
@@ -735,19 +968,11 @@ class LocalDrive:
                  pose=_rounded([pose.x, pose.y, pose.theta]), node=ctx.node_path)
         log.info("%s: recovery %d of %d (%s)", self.label, self.recoveries, self.config.recoveries, why)
         yield from brake(ctx, self.base)
-        turned = [0.0]
-        last = [pose.theta]
-
-        def once_round(theta: float) -> float:
-            turned[0] += wrap_angle(theta - last[0])
-            last[0] = theta
-            return 2.0 * math.pi - turned[0]
-
         here = self.base.state().pose
         room_round = float(self.planner.costmap.clearance_at(np.array([[here.x, here.y]]))[0]) - \
             self.config.planner.limits.radius
-        if room_round >= RECOVERY_TURN_ROOM:
-            yield from self._turn(once_round, None)
+        if room_round >= RECOVERY_TURN_ROOM and (self._guard is None or self._guard.turn_clear(here, 2.0 * math.pi)):
+            yield from self._turn_by(2.0 * math.pi, None)
         else:
             log.info("%s: recovery without the turn: %.2f m round the footprint", self.label, room_round)
         room = self._room_behind(self.base.state().pose, self.config.back_off)

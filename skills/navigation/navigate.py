@@ -198,7 +198,8 @@ def local_drive_config(ctx: SkillContext, base: Base, max_v: float | None) -> Lo
     return LocalDriveConfig(planner=planner, margin=nav.margin, tracker=_tracker_config(ctx, base, max_v),
                             replan_interval=nav.replan_interval,
                             recoveries=nav.recoveries, back_off=nav.recovery_back_off,
-                            heading_tolerance=nav.heading_tolerance, goal_search=nav.goal_search)
+                            heading_tolerance=nav.heading_tolerance, goal_search=nav.goal_search,
+                            pose_jump=POSE_JUMP, jump_replans=MAX_JUMP_REPLANS)
 
 
 def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, max_v: float | None = None,

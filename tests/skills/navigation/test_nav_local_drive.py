@@ -318,3 +318,53 @@ def test_the_safety_filter_switch_reaches_the_planner(events):
     for nav, expected in (({}, True), ({"safety_filter": False}, False)):
         robot = _robot(room(), Pose2D(1.0, 1.5, 0.0), nav=nav)
         assert local_drive_config(_ctx(robot, events), robot.base, None).planner.use_cbf is expected
+
+
+class JumpBase(BumpBase):
+    """A base whose localised pose jumps once, at clock time ``at`` [s], by ``(dx, dy)``
+    [m] (the localiser finding the robot elsewhere), and that can report itself not
+    localised from ``lost`` [s] on."""
+
+    def __init__(self, clock: ManualClock, at: float, dx: float, dy: float, lost: float = math.inf) -> None:
+        super().__init__(clock, [])
+        self.at, self.dx, self.dy, self.lost = at, dx, dy, lost
+        self.jumped = False
+
+    def state(self) -> BaseState:
+        st = super().state()
+        return BaseState(st.pose, st.v, st.w, st.stamp, st.faults, localised=self._clock.now() < self.lost)
+
+    def step(self, dt: float) -> None:
+        super().step(dt)
+        if not self.jumped and self._clock.now() >= self.at:
+            self.jumped = True
+            self.pose = Pose2D(self.pose.x + self.dx, self.pose.y + self.dy, self.pose.theta)
+
+
+def _jump_robot(at: float, dx: float, dy: float, lost: float = math.inf) -> MockRobot:
+    robot = _robot(room(), Pose2D(1.0, 1.5, 0.0))
+    base = JumpBase(robot.clock, at, dx, dy, lost)
+    base.pose = Pose2D(1.0, 1.5, 0.0)
+    robot.base = base
+    return robot
+
+
+def test_a_pose_jump_plans_again_from_the_new_pose(events):
+    """Half-way, the localiser moves the robot 0.5 m sideways: the drive brakes, forgets
+    its marks and plans again from where the robot now is, and reaches the goal."""
+    robot = _jump_robot(at=2.0, dx=0.0, dy=0.5)
+    ctx = _ctx(robot, events)
+    run = _drive(robot, ctx, x=5.0, y=1.5, theta=0.0)
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    assert robot.base.pose.distance_to(Pose2D(5.0, 1.5)) <= 0.09
+    (replan,) = _of(events, "nav_replan")
+    assert replan["reason"] == "the localised pose jumped" and replan["jump"] == pytest.approx(0.5, abs=0.05)
+
+
+def test_a_base_that_stops_being_localised_fails_the_drive(events):
+    robot = _jump_robot(at=math.inf, dx=0.0, dy=0.0, lost=1.0)
+    ctx = _ctx(robot, events)
+    run = _drive(robot, ctx, x=5.0, y=1.5)
+    assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.EXECUTION
+    assert run.failure.reason.startswith("lost localisation on the way to (5.00, 1.50)")
+    assert robot.base.state().v == 0.0
