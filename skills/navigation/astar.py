@@ -124,9 +124,11 @@ def plan_path(
     return [cell_to_world(grid, *divmod(i, w)) for i in cells]
 
 
-def line_is_free(costmap: CostMap, a: tuple[float, float], b: tuple[float, float]) -> bool:
+def line_is_free(costmap: CostMap, a: tuple[float, float], b: tuple[float, float], *,
+                 clearance: float = 0.0) -> bool:
     """True when every cell the segment ``a``-``b`` [m] passes over is free (sampled at a
-    quarter cell, so a diagonal cannot slip between two blocked cells)."""
+    quarter cell, so a diagonal cannot slip between two blocked cells) and, past the
+    first, at least ``clearance`` [m] from the nearest obstacle cell."""
     length = math.hypot(b[0] - a[0], b[1] - a[1])
     n = max(1, math.ceil(length / (costmap.resolution * 0.25)))
     grid = costmap.grid
@@ -135,15 +137,25 @@ def line_is_free(costmap: CostMap, a: tuple[float, float], b: tuple[float, float
         r, c = world_to_cell(grid, a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
         if not costmap.in_bounds(r, c) or costmap.blocked[r, c]:
             return False
+        if k and costmap.clearance[r, c] < clearance:
+            return False
     return True
 
 
-def simplify_path(costmap: CostMap, path: list[tuple[float, float]]) -> list[tuple[float, float]]:
+def simplify_path(costmap: CostMap, path: list[tuple[float, float]], *,
+                  keep_clearance: float = 0.0) -> list[tuple[float, float]]:
     """Drop waypoints while the straight line between the kept ones stays free (greedy
     farthest-visible shortcutting). The first and last points are kept; the start may lie
-    in the inflated zone, so segments leaving it are checked from their second cell on."""
+    in the inflated zone, so segments leaving it are checked from their second cell on.
+    ``keep_clearance`` [m] > 0: a shortcut also keeps as far from obstacles as the path
+    it replaces did, up to that much beyond the inflation (less a cell, for the grid),
+    so a path A* kept off a corner is not pulled back onto it."""
     if len(path) <= 2:
         return list(path)
+    clear = None
+    if keep_clearance > 0:
+        cap = costmap.radius + costmap.margin + keep_clearance
+        clear = [min(costmap.clearance_at(x, y), cap) - costmap.resolution for x, y in path]
     out = [path[0]]
     i = 0
     while i < len(path) - 1:
@@ -154,7 +166,8 @@ def simplify_path(costmap: CostMap, path: list[tuple[float, float]]) -> list[tup
                 # shortcut from a start in the inflation only along the planned first step
                 j = i + 1
                 break
-            if line_is_free(costmap, a, path[j]):
+            need = min(clear[i + 1 : j + 1], default=0.0) if clear is not None else 0.0
+            if line_is_free(costmap, a, path[j], clearance=need):
                 break
             j -= 1
         out.append(path[j])

@@ -164,6 +164,10 @@ ITEM_APPROACH_TURNS = (0.0, 0.35, -0.35, 0.7, -0.7, 1.05, -1.05, 1.4, -1.4)
 #: [s] a pose jump is looked for between two poses at most this far apart (consecutive
 #: ticks of the DWA or docking; not across a turn or a back-off, whose motion is not logged)
 JUMP_WINDOW = 0.2
+#: [m] the planned path's shortcuts keep as far from obstacles as A*'s path did, up to this
+#: beyond the inflation (A*'s own penalty distance): a path pulled onto a corner by its
+#: shortcuts left the DWA a passage its clearance term preferred standing still to
+PATH_KEEP = 0.3
 #: [m] how far outside the filter's zone a moved goal lies beyond the look-ahead
 #: (:meth:`LocalDrive._leave_zones`): the barrier sits at the look-ahead point, so at a goal
 #: only ``l`` outside the zone the base could not turn towards the obstacle
@@ -347,9 +351,10 @@ class LocalDrive:
         if pre is not None:
             grid_path = plan_path(cm, (start.x, start.y), pre)
             if grid_path is not None:
-                grid_path = [*simplify_path(cm, grid_path), (gx, gy)]
+                grid_path = [*simplify_path(cm, grid_path, keep_clearance=PATH_KEEP), (gx, gy)]
         if grid_path is None and cm.is_free(gx, gy):
-            grid_path = simplify_path(cm, plan_path(cm, (start.x, start.y), (gx, gy)) or []) or None
+            grid_path = simplify_path(cm, plan_path(cm, (start.x, start.y), (gx, gy)) or [],
+                                      keep_clearance=PATH_KEEP) or None
         if grid_path is None:
             if log_none:
                 self.ctx.emit("nav_plan", why=why, found=False, label=self.label, node=self.ctx.node_path)

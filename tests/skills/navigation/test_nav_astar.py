@@ -134,3 +134,33 @@ def test_100x80_grid_with_obstacles():
     assert all(cm.is_free(x, y) for x, y in path)
     length = sum(math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in itertools.pairwise(path))
     assert length >= math.hypot(4.4, 3.4) - 1e-9
+
+
+def _segment_clearance(cm, path):
+    """The smallest clearance [m] of the cells the polyline's segments pass over."""
+    out = math.inf
+    for (x0, y0), (x1, y1) in itertools.pairwise(path):
+        n = max(1, math.ceil(math.hypot(x1 - x0, y1 - y0) / (cm.resolution * 0.25)))
+        for k in range(1, n + 1):
+            t = k / n
+            out = min(out, cm.clearance_at(x0 + t * (x1 - x0), y0 + t * (y1 - y0)))
+    return out
+
+
+def test_shortcuts_can_keep_the_clearance_astar_kept_round_a_corner():
+    """A box in a 4 x 3 m room, start and goal either side of it: A* (with its wall
+    penalty) passes the box's corner with room to spare; plain shortcutting pulls the
+    path back to the inflation's edge at the corner, keep_clearance keeps the room."""
+    data = np.zeros((60, 80), dtype=np.int8)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    data[20:60, 38:42] = 100  # a wall from the north side down to y = 1.0 m
+    cm = inflate(OccupancyGrid(data, 0.05), 0.2, 0.03)
+    grid_path = plan_path(cm, (1.0, 2.0), (3.0, 2.0))
+    assert grid_path is not None
+    kept = _segment_clearance(cm, grid_path)
+    plain = simplify_path(cm, grid_path)
+    keep = simplify_path(cm, grid_path, keep_clearance=0.3)
+    assert _segment_clearance(cm, plain) < 0.23 + 0.06  # onto the corner, by the inflation's edge
+    assert _segment_clearance(cm, keep) >= min(kept, 0.23 + 0.3) - 0.05 - 1e-9
+    assert _segment_clearance(cm, keep) > _segment_clearance(cm, plain) + 0.1
+    assert len(keep) > len(plain) and keep[0] == plain[0] and keep[-1] == plain[-1]
