@@ -62,6 +62,9 @@ class LikelihoodField:
         else:
             dist = np.full(grid.data.shape, np.inf)
         self.distance = np.minimum(dist, self.model.max_occ_dist)
+        # the field with a one-cell border at max_occ_dist: a clipped index then reads
+        # max_occ_dist for any point off the map (one gather, no masks)
+        self._padded = np.pad(self.distance, 1, constant_values=self.model.max_occ_dist).ravel()
         o = grid.origin
         self._origin = (o.x, o.y, math.cos(o.theta), math.sin(o.theta))
 
@@ -71,13 +74,13 @@ class LikelihoodField:
         ox, oy, c, s = self._origin
         dx, dy = x - ox, y - oy
         res = self.grid.resolution
-        col = np.floor((c * dx + s * dy) / res + 1e-9).astype(np.int64)
-        row = np.floor((-s * dx + c * dy) / res + 1e-9).astype(np.int64)
+        col = np.floor((c * dx + s * dy) / res + 1e-9)
+        row = np.floor((-s * dx + c * dy) / res + 1e-9)
         h, w = self.distance.shape
-        inside = (row >= 0) & (row < h) & (col >= 0) & (col < w)
-        out = np.full(x.shape, self.model.max_occ_dist)
-        out[inside] = self.distance[row[inside], col[inside]]
-        return out
+        # into the border (-1 or the size) when off the map; fmax/fmin send nan there too
+        col = np.fmin(np.fmax(col, -1.0, out=col), w, out=col)
+        row = np.fmin(np.fmax(row, -1.0, out=row), h, out=row)
+        return self._padded.take((row.astype(np.int64) + 1) * (w + 2) + col.astype(np.int64) + 1)
 
     def beam_subset(self, ranges: np.ndarray, angles: np.ndarray, range_max: float) -> tuple[np.ndarray, np.ndarray]:
         """At most ``max_beams`` evenly spaced beams with a return (``range < range_max``)."""
