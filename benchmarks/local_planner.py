@@ -203,7 +203,7 @@ def closed_loop_rows() -> list[str]:
     d[0:50, 95:105] = 100
     grid = OccupancyGrid(data=d, resolution=0.05)
     poles, radii = np.array([[3.0, 3.35], [6.5, 4.0], [7.5, 2.9]]), np.array([0.12, 0.2, 0.15])
-    walker = Walker(start=(5.5, 5.2), velocity=(0.0, -0.5), radius=0.22, trigger_x=3.5)
+    walker = Walker(start=(5.5, 5.2), velocity=(0.0, -0.5), radius=0.22, trigger_x=4.0)
     rows = []
     default = CbfConfig()
     for label, alpha, tight, use in (("paper alpha 0.21 / 0.46", PAPER_ALPHA, PAPER_ALPHA_TIGHT, True),

@@ -191,7 +191,7 @@ def nav_report_lines(nav: Mapping[str, Any]) -> list[str]:
         f"{nav.get('nav_ticks_h_negative', 0) - nav.get('nav_ticks_h_negative_person_in', 0)} "
         f"({nav.get('nav_runs_h_negative', 0) - nav.get('nav_runs_person_in', 0)} runs, "
         f"{nav.get('trials_h_negative_other', 0)} trials) |"),
-        f"| logged commands from the filter's escape (a bounded reverse, or forward) | {nav.get('nav_ticks_escaped', 0)} |",
+        f"| logged commands from the filter's escape (a bounded reverse) | {nav.get('nav_ticks_escaped', 0)} |",
         f"| trials with any contact (base or arm) | {nav['trials_with_contact']}/{nav['trials']}: {what} |",
         "",
     ]

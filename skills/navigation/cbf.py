@@ -57,7 +57,8 @@ measured behind and ahead on the lidar costmap (the lidar sees 360 degrees; the 
 no rear bumper), and every barrier relaxed by one heavily weighted slack: the base backs
 away (or moves on) as far as that keeps or restores the barriers, and stands where no
 motion along its heading helps (someone walking into its side, which a unicycle cannot
-get out of the way of). Without room it brakes at full deceleration.
+get out of the way of). Without room it brakes at full deceleration. (The local planner
+gives it room behind only, and none while docking: ``LocalPlanner.safe``.)
 
 **alpha** (section 4.3 and the experiments): the standard condition used here is
 ``hdot >= -alpha h``: alpha bounds how fast ``h`` may *decrease* (h decays at most as

@@ -26,9 +26,14 @@ Per control tick (:meth:`DwaPlanner.step`):
    ``heading``: the angle between its heading and the direction to the path point
    ``lookahead`` metres beyond its projection, / pi; ``goal``: minus the progress along
    the path (the projection's arc length gained) / (max_v * horizon); ``clearance``:
-   ``1 - min(gap / clearance_scale, 1)`` with the smallest gap along the rollout, or
-   ``3 - 2 t_hit / horizon`` for an admissible rollout that hits (it may still brake in
-   time, but it heads for a collision); ``speed``: ``1 - v / max_v``; ``social``: the
+   ``1 - min(gap / scale, 1)`` with the smallest gap along the rollout, or ``3 - 2 t_hit /
+   horizon`` for an admissible rollout that hits (it may still brake in time, but it
+   heads for a collision); ``scale`` is ``clearance_scale``, or the smallest gap the path
+   itself leaves over the stretch the rollouts can reach when that is less (at least
+   ``min_clearance_scale``): a passage A* found, narrower than ``clearance_scale``, is
+   followed without a penalty for being in it (with the fixed scale, standing still
+   scored better than driving into a 0.2 m-wide squeeze by the lab's crate, and the base
+   stood there, "stuck on the way to depot", though the path was free); ``speed``: ``1 - v / max_v``; ``social``: the
    largest social cost along the rollout, people moved at their velocity.
 
 Outcomes for the caller (:class:`DwaStatus`): ``GOAL_REACHED``; ``NO_TRAJECTORY`` (no
@@ -92,6 +97,7 @@ class DwaConfig:
     w_social: float = 1.0
     path_scale: float = 0.5
     clearance_scale: float = 0.4
+    min_clearance_scale: float = 0.05
     goal_tolerance: float = 0.08
     blocked_lookahead: float = 2.0
     stuck_time: float = 4.0
@@ -101,7 +107,8 @@ class DwaConfig:
     def validate(self) -> list[str]:
         errs = self.limits.validate() + self.social.validate()
         errs += positive(self, "horizon", "step", "window_time", "lookahead", "path_spacing", "path_scale",
-                         "clearance_scale", "goal_tolerance", "blocked_lookahead", "stuck_time", "stuck_progress")
+                         "clearance_scale", "min_clearance_scale", "goal_tolerance", "blocked_lookahead", "stuck_time",
+                         "stuck_progress")
         if self.step > self.horizon:
             errs.append(f"step {self.step} s exceeds horizon {self.horizon} s")
         if self.n_v < 2 or self.n_w < 2:
@@ -287,6 +294,17 @@ class DwaPlanner:
             return math.inf
         return float(np.argmax(lethal)) * p.spacing
 
+    def path_gap(self, points: np.ndarray, costmap: ClearanceMap, circles: Circles) -> float:
+        """The smallest gap [m] the path ``points`` (n, 2) leave the footprint: costmap
+        clearance less the robot radius, and the distance outside each non-person
+        circle's safety radius (people move on)."""
+        g = costmap.clearance_at(points) - self.config.limits.radius
+        fixed = circles.select(~circles.person)
+        if len(fixed):
+            d = np.hypot(points[:, None, 0] - fixed.centres[:, 0], points[:, None, 1] - fixed.centres[:, 1])
+            g = np.minimum(g, (d - fixed.safety_radii).min(axis=1))
+        return float(g.min()) if g.size else math.inf
+
     # ------------------------------------------------------------------ tick
     def step(self, pose: Pose2D, v0: float, w0: float, dt: float, now: float, costmap: ClearanceMap,
              circles: Circles, v_cap: float | None = None) -> DwaResult:
@@ -316,6 +334,10 @@ class DwaPlanner:
 
         stop_cap = math.sqrt(2.0 * lim.accel_v * max(0.0, max(remaining, d_goal) - 0.5 * cfg.goal_tolerance))
         cap = stop_cap if v_cap is None else min(v_cap, stop_cap)
+        lo = max(0, path.index - 2)
+        local = path.points[lo : path.ahead(lim.max_v * cfg.horizon + 0.5) + 1]
+        ahead = local[np.hypot(local[:, 0] - pose.x, local[:, 1] - pose.y) > lim.radius]  # not the base's own spot
+        path_gap = self.path_gap(ahead, costmap, circles)
         vs, ws = self.window_samples(v0, w0, cap)
         traj, speed, dist = rollouts(pose, v0, w0, vs, ws, cfg.step, self.times.size, lim.accel_v, lim.accel_w)
         gap, hit = self.gaps(traj, pose, costmap, circles)
@@ -330,8 +352,6 @@ class DwaPlanner:
         # the end point against the path: cross-track distance, progress along it, and the
         # heading towards the path point ``lookahead`` beyond the end point's projection
         end = traj[:, -1, :]
-        lo = max(0, path.index - 2)
-        local = path.points[lo : path.ahead(lim.max_v * cfg.horizon + 0.5) + 1]
         d_end = np.hypot(end[:, None, 0] - local[:, 0], end[:, None, 1] - local[:, 1])
         j = np.argmin(d_end, axis=1)
         cross = d_end[np.arange(vs.size), j]
@@ -341,10 +361,11 @@ class DwaPlanner:
         bearing = np.arctan2(aim[:, 1] - end[:, 1], aim[:, 0] - end[:, 0])
         heading_err = np.where(to_aim > cfg.goal_tolerance, np.abs(_wrap(bearing - end[:, 2])) / math.pi, 0.0)
         min_gap = np.clip(gap.min(axis=1), 0.0, None)
-        # 0..1 by the smallest gap; 1..3 for an (admissible) rollout that hits, sooner = worse
+        # 0..1 by the smallest gap against what the path itself leaves; 1..3 for an
+        # (admissible) rollout that hits, sooner = worse
+        scale = min(cfg.clearance_scale, max(cfg.min_clearance_scale, path_gap))
         t_hit = np.where(any_hit, self.times[first], np.inf)
-        clearance = np.where(any_hit, 3.0 - 2.0 * t_hit / cfg.horizon,
-                             1.0 - np.minimum(min_gap / cfg.clearance_scale, 1.0))
+        clearance = np.where(any_hit, 3.0 - 2.0 * t_hit / cfg.horizon, 1.0 - np.minimum(min_gap / scale, 1.0))
         cost = (cfg.w_path * cross / cfg.path_scale
                 + cfg.w_heading * heading_err
                 - cfg.w_goal * progress / (lim.max_v * cfg.horizon)

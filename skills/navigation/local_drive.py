@@ -772,7 +772,7 @@ class LocalDrive:
                 return True
             circles = self.planner.circles_at(now)
             if len(circles) and self.config.planner.use_cbf:
-                f = self.planner.safe(st.pose, (v, w), None, circles, u, dt, max(v, 0.0))
+                f = self.planner.safe(st.pose, (v, w), None, circles, u, dt, max(v, 0.0), escape=False)
                 self.ctx.emit("nav_tick", pose=_rounded([st.pose.x, st.pose.y, st.pose.theta]), cmd=_rounded([f.v, f.w]),
                               ref=_rounded([v, w]), **barrier_fields(f, circles, st.pose, st.v), active=int(f.active.sum()),
                               infeasible=f.status is QpStatus.INFEASIBLE, status="dock", circles=len(circles))

@@ -16,10 +16,10 @@ tick (it never blocks, never reads a clock and never talks to a device):
    may only slow the base, never drive it faster than the DWA's command (the filter sees
    only the circles, and a faster command, fleeing someone who walks up from behind, is
    one the costmap never checked). When that leaves no safe command (someone stepped
-   into the zone, or walks at the base), the filter may *escape*: move the base along
-   its heading at up to ``CbfConfig.escape_speed``, back or forward, as far as the
-   costmap shows room for the footprint (:meth:`LocalPlanner.escape_room`; the lidar
-   sees all round); when that cannot keep every barrier either, it brakes.
+   into the zone, or walks at the base), the filter may *escape*: back the base off at
+   up to ``CbfConfig.escape_speed`` as far as the costmap shows room behind it for the
+   footprint (:meth:`LocalPlanner.escape_room`; the lidar sees all round); when that
+   cannot keep every barrier either, it brakes.
 
 The caller acts on the DWA status and ``path_blocked`` (re-plan globally on
 :meth:`LocalPlanner.replan_grid`; recover when ``STUCK``).
@@ -248,10 +248,15 @@ class LocalPlanner:
         return out[0], out[1]
 
     def safe(self, pose: Pose2D, u_ref: tuple[float, float], reference: Pose2D | None, circles: Circles,
-             u_prev: tuple[float, float], dt: float, v_cap: float) -> CbfResult:
-        """The filter's command for ``u_ref`` (capped forward at ``v_cap`` [m/s]), with
-        the escape room measured at ``pose`` (docking calls it too)."""
-        return self.cbf.filter(pose, u_ref, reference, circles, u_prev, dt, v_cap, self.escape_room(pose))
+             u_prev: tuple[float, float], dt: float, v_cap: float, *, escape: bool = True) -> CbfResult:
+        """The filter's command for ``u_ref`` (capped forward at ``v_cap`` [m/s]); with
+        ``escape``, the escape may back the base off as far as the room measured behind
+        ``pose`` allows (never forward: driven on past its goal, at the lab's depot stop
+        while someone walked up behind, the base put the item 6 cm off and the place
+        failed). Docking passes ``escape=False``: a stand-off must not be left (someone
+        stepping in while the base docks makes it stand)."""
+        room = (self.escape_room(pose)[0], 0.0) if escape else (0.0, 0.0)
+        return self.cbf.filter(pose, u_ref, reference, circles, u_prev, dt, v_cap, room)
 
     def step(self, pose: Pose2D, v_meas: float, w_meas: float, now: float, dt: float,
              scan: LaserScan | None = None) -> LocalCommand:

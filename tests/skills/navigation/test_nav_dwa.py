@@ -122,6 +122,30 @@ def test_open_space_drives_straight_along_the_path():
     assert r.n_admissible == r.n_rollouts
 
 
+def test_a_narrow_passage_on_the_path_is_driven_into():
+    """A 0.5 m gap 0.6 m ahead (7 cm beyond the radius each side, less than the 0.4 m
+    clearance scale): the base drives on into it, as the path asks, rather than creeping
+    or standing (with the fixed scale, the clearance penalty of reaching the squeeze
+    outweighed the progress)."""
+    cm = _costmap(blocks=[(2.0, 0.0, 2.6, 2.75), (2.0, 3.25, 2.6, 6.0)])
+    path = [(1.4, 3.0), (4.0, 3.0)]
+
+    def drive(cfg):
+        p = _planner(path, cfg)
+        pose, v, top = Pose2D(1.4, 3.0, 0.0), 0.05, 0.0
+        for k in range(60):                                          # 3 s
+            r = _step(p, cm, pose, v0=v, now=k * DT)
+            v, top = r.v, max(top, r.v)
+            pose = Pose2D(pose.x + v * DT, pose.y, 0.0)
+        return pose.x, top
+
+    x, _ = drive(DwaConfig())
+    assert x > 2.2
+    assert _planner(path).path_gap(np.array([[2.3, 3.0]]), cm, Circles()) == pytest.approx(0.25 - 0.178, abs=0.03)
+    x_fixed, _ = drive(replace(DwaConfig(), min_clearance_scale=0.4))  # the clearance scale fixed at 0.4 m
+    assert x_fixed < 1.6
+
+
 def test_a_path_to_the_left_turns_left():
     cm = _costmap()
     p = _planner([(2.0, 2.0), (2.0, 5.0)])
