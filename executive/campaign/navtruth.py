@@ -19,8 +19,12 @@ Two sources per trial:
   the runs of ``h < 0`` (consecutive logged ticks) that began with *a person walking into
   the standing base* (the circle with the smallest ``h`` a tracked person closing at more
   than :data:`CLOSING` while the base's measured speed was at most :data:`STANDING`:
-  nothing the base could have done, bar moving sideways, which a unicycle cannot) from
-  the others (the base's own doing, or a circle first seen inside the zone).
+  nothing the base could have done, bar moving sideways, which a unicycle cannot), those
+  that began with *the circle jumping* (``h`` fell from the tick before by more than the
+  base's and the circle's logged speeds can explain, ``2 |p - c| (|v| + closing) dt``,
+  plus :data:`JUMP_SLACK`: a circle first seen inside the zone, or one that grew or moved
+  between two scans as more of a body came into view; the perception, not the motion),
+  and the others (the base's own doing).
 
 :func:`summarize_nav` folds the trials' measures into the campaign summary
 (``summary.json`` key ``nav_truth``) and :func:`nav_report_lines` into report.md.
@@ -36,12 +40,14 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["CLOSING", "STANDING", "log_measures", "nav_report_lines", "summarize_nav", "truth_measures"]
+__all__ = ["CLOSING", "JUMP_SLACK", "STANDING", "log_measures", "nav_report_lines", "summarize_nav", "truth_measures"]
 
 #: [m/s] a person closing on the base faster than this is walking into it
 CLOSING = 0.05
 #: [m/s] a base whose measured speed is at most this is standing
 STANDING = 0.05
+#: [m^2] a fall of h beyond what the logged speeds explain by more than this is a jump
+JUMP_SLACK = 0.01
 
 
 def truth_measures(path: Path) -> dict[str, Any]:
@@ -87,32 +93,50 @@ def _person_walked_in(rec: Mapping[str, Any]) -> bool:
             and isinstance(v, (int, float)) and abs(v) <= STANDING)
 
 
+def _jumped(prev: Mapping[str, Any] | None, rec: Mapping[str, Any]) -> bool:
+    """``h`` fell from ``prev`` to ``rec`` by more than the logged speeds explain."""
+    if prev is None or not all(isinstance(rec.get(k), (int, float)) for k in ("h_dist", "v_meas", "t")) \
+            or not isinstance(prev.get("t"), (int, float)):
+        return False
+    dt = max(float(rec["t"]) - float(prev["t"]), 0.0)
+    closing = max(0.0, float(rec.get("h_closing") or 0.0))
+    explained = 2.0 * float(rec["h_dist"]) * (abs(float(rec["v_meas"])) + closing) * dt
+    return float(prev["h"]) - float(rec["h"]) > explained + JUMP_SLACK
+
+
 def log_measures(records: Iterable[Mapping[str, Any]]) -> dict[str, Any]:
     """The safety filter's logged barrier values in a trial's event log: ``nav_ticks``
     (ticks with a barrier value), ``nav_ticks_h_negative``, of those
     ``nav_ticks_h_negative_person_in`` (in runs of ``h < 0`` that began with a person
     walking into the standing base; module docstring) and ``nav_runs_h_negative`` /
-    ``nav_runs_person_in`` (the runs), ``nav_ticks_escaped`` (commands from the filter's
-    escape solve) and ``nav_min_h`` [m^2]; {} when no tick logged one (the plain drive,
-    or nothing tracked)."""
+    ``nav_runs_person_in`` (the runs), ``nav_ticks_h_negative_jump`` / ``nav_runs_jump``
+    (runs that began with the circle jumping), ``nav_ticks_escaped`` (commands from the
+    filter's escape solve) and ``nav_min_h`` [m^2]; {} when no tick logged one (the plain
+    drive, or nothing tracked)."""
     ticks = [r for r in records if r.get("event") == "nav_tick" and isinstance(r.get("h"), (int, float))
              and math.isfinite(r["h"])]
     if not ticks:
         return {}
-    negative = person_in = runs = runs_in = 0
-    in_run = run_person = False
+    negative = person_in = jump = runs = runs_in = runs_jump = 0
+    in_run = run_person = run_jump = False
+    prev: Mapping[str, Any] | None = None
     for r in ticks:
         if r["h"] < 0.0:
             if not in_run:
                 in_run, run_person = True, _person_walked_in(r)
+                run_jump = not run_person and _jumped(prev, r)
                 runs += 1
                 runs_in += run_person
+                runs_jump += run_jump
             negative += 1
             person_in += run_person
+            jump += run_jump
         else:
             in_run = False
+        prev = r
     return {"nav_ticks": len(ticks), "nav_ticks_h_negative": negative, "nav_ticks_h_negative_person_in": person_in,
-            "nav_runs_h_negative": runs, "nav_runs_person_in": runs_in,
+            "nav_runs_h_negative": runs, "nav_runs_person_in": runs_in, "nav_ticks_h_negative_jump": jump,
+            "nav_runs_jump": runs_jump,
             "nav_ticks_escaped": sum(bool(r.get("escaped")) for r in ticks), "nav_min_h": min(r["h"] for r in ticks)}
 
 
@@ -153,8 +177,10 @@ def summarize_nav(truths: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         "nav_ticks_h_negative_person_in": sum(t.get("nav_ticks_h_negative_person_in", 0) for t in logged),
         "nav_runs_h_negative": sum(t.get("nav_runs_h_negative", 0) for t in logged),
         "nav_runs_person_in": sum(t.get("nav_runs_person_in", 0) for t in logged),
+        "nav_ticks_h_negative_jump": sum(t.get("nav_ticks_h_negative_jump", 0) for t in logged),
+        "nav_runs_jump": sum(t.get("nav_runs_jump", 0) for t in logged),
         "trials_h_negative_other": sum(t["nav_ticks_h_negative"] > t.get("nav_ticks_h_negative_person_in", 0)
-                                       for t in logged),
+                                       + t.get("nav_ticks_h_negative_jump", 0) for t in logged),
         "nav_ticks_escaped": sum(t.get("nav_ticks_escaped", 0) for t in logged),
         "nav_min_h": min((t["nav_min_h"] for t in logged), default=None),
     }
@@ -172,6 +198,9 @@ def nav_report_lines(nav: Mapping[str, Any]) -> list[str]:
     share = nav["truth_ticks_clear_share"]
     hshare = nav["nav_ticks_h_nonnegative_share"]
     what = ", ".join(f"{b} x{n}" for b, n in nav["contact_bodies"].items()) or "none"
+    other_ticks = (nav.get("nav_ticks_h_negative", 0) - nav.get("nav_ticks_h_negative_person_in", 0)
+                   - nav.get("nav_ticks_h_negative_jump", 0))
+    other_runs = nav.get("nav_runs_h_negative", 0) - nav.get("nav_runs_person_in", 0) - nav.get("nav_runs_jump", 0)
     return [
         "## Navigation (ground truth)", "",
         "| measure | value |", "|---|---|",
@@ -186,11 +215,11 @@ def nav_report_lines(nav: Mapping[str, Any]) -> list[str]:
         (f"| logged ticks with the filter's h >= 0 (the enforced barrier: footprint >= margin from each circle) | "
         f"{'-' if hshare is None else f'{100 * hshare:.3f} %'} of {nav['nav_ticks']}; smallest h "
         f"{_m(nav['nav_min_h'], 4)} m^2 |"),
-        (f"| logged ticks with h < 0: a person walking into the standing base / other | "
+        (f"| logged ticks with h < 0: a person walking into the standing base / the circle jumping "
+        f"inside the zone between two scans / other | "
         f"{nav.get('nav_ticks_h_negative_person_in', 0)} ({nav.get('nav_runs_person_in', 0)} runs) / "
-        f"{nav.get('nav_ticks_h_negative', 0) - nav.get('nav_ticks_h_negative_person_in', 0)} "
-        f"({nav.get('nav_runs_h_negative', 0) - nav.get('nav_runs_person_in', 0)} runs, "
-        f"{nav.get('trials_h_negative_other', 0)} trials) |"),
+        f"{nav.get('nav_ticks_h_negative_jump', 0)} ({nav.get('nav_runs_jump', 0)} runs) / "
+        f"{other_ticks} ({other_runs} runs, {nav.get('trials_h_negative_other', 0)} trials) |"),
         f"| logged commands from the filter's escape (a bounded reverse) | {nav.get('nav_ticks_escaped', 0)} |",
         f"| trials with any contact (base or arm) | {nav['trials_with_contact']}/{nav['trials']}: {what} |",
         "",

@@ -69,7 +69,7 @@ def barrier_fields(f: CbfResult | None, circles: Circles, pose: Pose2D, v_meas: 
     n = float(np.hypot(*d))
     closing = float(d @ circles.velocities[k]) / n if n > 1e-9 else 0.0
     out.update(h=round(float(f.h[k]), 4), h_person=bool(circles.person[k]), h_closing=round(closing, 3),
-               escaped=f.escaped)
+               h_dist=round(n, 3), escaped=f.escaped)
     return out
 
 
@@ -147,7 +147,8 @@ class LocalCommand:
         the smallest barrier value the filter enforced this tick (None without the filter
         or without circles), ``h_person`` whether that circle is a tracked person,
         ``h_closing`` [m/s] how fast it closes on the base (its tracked velocity towards
-        the base's centre; > 0 approaching), ``v_meas`` [m/s] the base's measured speed,
+        the base's centre; > 0 approaching), ``h_dist`` [m] its centre's distance from
+        the base's, ``v_meas`` [m/s] the base's measured speed,
         ``escaped`` whether the command came from the filter's escape solve; see
         :func:`mmexec.executive.campaign.navtruth.log_measures`."""
         return barrier_fields(self.cbf, self.circles, self.pose, v_meas)

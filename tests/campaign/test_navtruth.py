@@ -52,8 +52,8 @@ def test_log_measures_read_the_filters_barrier_values():
     recs = [{"event": "nav_tick", "h": 0.3}, {"event": "nav_tick", "h": None}, {"event": "nav_tick", "h": -0.05},
             {"event": "base_status"}, {"event": "nav_tick", "h": 1.2}]
     assert log_measures(recs) == {"nav_ticks": 3, "nav_ticks_h_negative": 1, "nav_ticks_h_negative_person_in": 0,
-                                  "nav_runs_h_negative": 1, "nav_runs_person_in": 0, "nav_ticks_escaped": 0,
-                                  "nav_min_h": -0.05}
+                                  "nav_runs_h_negative": 1, "nav_runs_person_in": 0, "nav_ticks_h_negative_jump": 0,
+                                  "nav_runs_jump": 0, "nav_ticks_escaped": 0, "nav_min_h": -0.05}
     assert log_measures([{"event": "nav_tick", "h": None}]) == {}
 
 
@@ -75,6 +75,18 @@ def test_runs_of_negative_h_begun_by_a_person_walking_into_the_standing_base():
     assert m["nav_ticks_escaped"] == 2
 
 
+def test_a_run_begun_by_the_circle_jumping_is_told_apart():
+    """h fell 0.2 m^2 in one 50 ms tick with the base at 0.1 m/s and the circle standing
+    0.6 m away (explained: 2 * 0.6 * 0.1 * 0.05 = 0.006 m^2): the circle jumped (a body
+    seen anew inside the zone); a fall of 0.08 m^2 with someone closing at 1.5 m/s is motion."""
+    def tick(t, h, v, closing=0.0):
+        return {"event": "nav_tick", "t": t, "h": h, "h_person": False, "h_closing": closing, "h_dist": 0.6, "v_meas": v}
+    jumped = log_measures([tick(1.0, 0.15, 0.1), tick(1.05, -0.05, 0.1), tick(1.1, -0.02, -0.05), tick(1.15, 0.01, 0.0)])
+    assert jumped["nav_runs_jump"] == 1 and jumped["nav_ticks_h_negative_jump"] == 2
+    moved = log_measures([tick(1.0, 0.03, 0.1), tick(1.05, -0.05, 0.1, closing=1.5)])
+    assert moved["nav_runs_jump"] == 0 and moved["nav_ticks_h_negative"] == 1
+
+
 def test_the_summary_and_the_report(tmp_path):
     a = truth_measures(_sidecar(tmp_path / "a.jsonl", [(0.3, [0.5, 0.9]), (0.2, [0.25, 0.7])], []))
     b = truth_measures(_sidecar(tmp_path / "b.jsonl", [(0.05, [0.1, 0.9]), (-0.01, [0.4, 0.4])], ["crowd_1"]))
@@ -88,5 +100,6 @@ def test_the_summary_and_the_report(tmp_path):
     text = "\n".join(nav_report_lines(s))
     assert "| trials with a contact with a person (target 0) | 1/2 (1 contacts) |" in text
     assert "75.000 % of 4" in text and "90.000 % of 20" in text
-    assert "| logged ticks with h < 0: a person walking into the standing base / other | 0 (0 runs) / 2 (0 runs, 1 trials) |" in text
+    assert ("| logged ticks with h < 0: a person walking into the standing base / the circle jumping inside the zone "
+            "between two scans / other | 0 (0 runs) / 0 (0 runs) / 2 (0 runs, 1 trials) |") in text
     assert summarize_nav([{}, {"panel_lights": 2}]) == {} and nav_report_lines({}) == []
