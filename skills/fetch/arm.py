@@ -74,8 +74,9 @@ HELD_CLEARANCE = 0.005
 PLACE_RAISES = (0.0, 0.05, 0.10)
 
 #: An attached item whose longest side is at least this many times its next longest is
-#: *elongated* (a screwdriver, pliers, a pen; not a box or a can).
-ELONGATED = 2.0
+#: *elongated*: a tool (a screwdriver, pliers, a pen: 3.5-4.8 by their catalogue sizes),
+#: not a box or a can standing up (1.6-1.8; 2.0 as held, each side 1 cm smaller).
+ELONGATED = 3.0
 
 #: Releases at the place pose before place gives up on an item that stays in the gripper:
 #: after each release and retract the fingers close to stow; closing on something means the

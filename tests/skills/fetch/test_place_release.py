@@ -19,6 +19,7 @@ from mmexec.skills.manipulation.kinematics import ur5e
 CARRY = [0.0, -2.2, 2.3, -3.24, -1.5708, 0.0]  # config/ur5e_objects_sim.yaml named pose carry
 SCREWDRIVER = (0.19, 0.04, 0.04)
 BOX = (0.05, 0.05, 0.08)
+CAN_AS_HELD = (0.04, 0.04, 0.08)  # the cylinder's box as held (HELD_CLEARANCE off each side)
 
 
 def _held_as_top_grasped() -> np.ndarray:
@@ -42,6 +43,7 @@ def test_the_nominal_place_would_stand_a_top_grasped_tool_on_end_but_not_a_box()
     assert abs((kin.fk(CARRY)[:3, :3] @ T_item[:3, 0])[2]) < 0.05
     assert _stood_up(SCREWDRIVER, T_item, nominal.place)
     assert not _stood_up(BOX, T_item, nominal.place)  # not elongated: the seed's release
+    assert not _stood_up(CAN_AS_HELD, T_item, nominal.place)
     # a tool the nominal pose keeps lying is released as before
     T_lying = np.eye(4)
     T_lying[:3, :3] = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])  # long side along tool y
