@@ -292,6 +292,7 @@ class LocalDrive:
         self._no_dock_until = -math.inf  # [s] docking paused (the held item stopped it)
         self._prev: tuple[Pose2D, float, float, float] | None = None  # pose, v, w and clock of the last tick
         self._jump = 0.0  # [m] the pose's change at the last tick
+        self._item_blocked = False  # the last turn was not made: it would sweep the held item
         self.jump_replans = 0
 
     # ------------------------------------------------------------------ planning
@@ -686,7 +687,9 @@ class LocalDrive:
                 yield from brake(ctx, base)
                 if (yield from self._turn_to(self.goal.theta)):
                     return
-                continue  # a contact while turning: it backed off and re-planned
+                if self._item_blocked:
+                    yield from self._recover("the held item cannot turn to the goal's heading")
+                continue  # (or a contact while turning: it backed off and re-planned)
             replanned = cmd.path_blocked and now - self._last_replan >= cfg.replan_interval and \
                 self._replan(now, "blocked")
             if replanned:
@@ -703,6 +706,8 @@ class LocalDrive:
                 yield from brake(ctx, base)
                 yield from self._face_path(force=True)
                 self.planner.reset_command()
+                if self._stuck(cmd.dwa.remaining, ctx.clock.now()):
+                    yield from self._recover("stuck: the held item would sweep into something")
                 continue
             base.set_velocity(cmd.v, cmd.w)
             yield
@@ -782,7 +787,10 @@ class LocalDrive:
                 if math.hypot(self.goal.x - st.pose.x, self.goal.y - st.pose.y) <= ITEM_DOCK_NEAR:
                     # near enough: align the item-safe way rather than turn to creep the rest
                     self._emit_item("docked short: the last move would sweep the held item into something", st.pose)
-                    return bool((yield from self._turn_to(self.goal.theta)))
+                    if (yield from self._turn_to(self.goal.theta)):
+                        return True
+                    self._no_dock_until = ctx.clock.now() + ITEM_DOCK_PAUSE
+                    return False
                 self._emit_item("docking stopped: the next move would sweep the held item into something", st.pose)
                 self._no_dock_until = now + ITEM_DOCK_PAUSE
                 self.planner.reset_command()
@@ -812,8 +820,12 @@ class LocalDrive:
         """Turn in place to heading ``target`` [rad] within the heading tolerance
         (observing scans on the way); ``rate`` [rad/s] caps the turn rate. With an item
         held, the turn goes the way round that keeps it clear (:meth:`_item_way`). False
-        when a contact cut the turn short (the contact recovery ran)."""
+        when a contact cut the turn short (the contact recovery ran), or when neither way
+        keeps the item clear (no turn; ``_item_blocked`` set)."""
         angle = yield from self._item_way(target)
+        self._item_blocked = angle is None
+        if angle is None:
+            return False
         return (yield from self._turn_by(angle, rate))
 
     def _turn_by(self, angle: float, rate: float | None) -> Generator[None, None, bool]:
@@ -828,12 +840,12 @@ class LocalDrive:
 
         return (yield from self._turn(left, rate))
 
-    def _item_way(self, target: float) -> Generator[None, None, float]:
+    def _item_way(self, target: float) -> Generator[None, None, float | None]:
         """The signed turn [rad] to heading ``target``: the shorter way, or, with an item
         held that the shorter way would sweep into something (:class:`ItemGuard`), the
         longer way when that keeps it clear; when neither does, back off up to
-        :data:`ITEM_BACK_OFF` where there is room and look again; failing that the
-        shorter way (logged ``nav_item``)."""
+        :data:`ITEM_BACK_OFF` where there is room and look again; failing that None
+        (logged ``nav_item``): the base does not turn."""
         guard = self._guard
         angle = wrap_angle(target - self.base.state().pose.theta)
         if guard is None or abs(angle) <= self.config.heading_tolerance:
@@ -853,9 +865,9 @@ class LocalDrive:
             self._emit_item(f"back off {room:.2f} m to turn", pose)
             yield from self._back_off(room)
         pose = self.base.state().pose
-        self._emit_item("the turn sweeps the held item into something either way", pose)
-        log.warning("%s: turning to %.2f rad sweeps the held item into something either way", self.label, target)
-        return wrap_angle(target - pose.theta)
+        self._emit_item("no turn: it would sweep the held item into something either way", pose)
+        log.info("%s: turning to %.2f rad would sweep the held item into something either way", self.label, target)
+        return None
 
     def _item_horizon(self, v: float, w: float) -> float:
         """[s] how far ahead command ``(v, w)`` is checked for the held item: the time the
