@@ -8,7 +8,8 @@ truth (items in the depot; the truth sidecar's contacts and gaps, sim/truth.py).
   (pure pursuit on the static map) runs into the same person.
 * In the corridors world a box the map does not show blocks the strip east of the long
   desk: the robot sees it, re-plans through the 1.2 m corridor west of the desk, and
-  delivers the item without touching it."""
+  delivers the item without touching it (or plans that way at once when the search's first
+  look round saw the parcel)."""
 
 from __future__ import annotations
 
@@ -68,7 +69,7 @@ def test_a_person_crossing_the_way_is_waited_for_and_the_item_delivered(tmp_path
     assert end["event"] == "truth_end" and end["contacts"] == 0, end
     assert end["min_gap"]["walker"] > 0.2, end  # never within 0.2 m of the person's body
     # the robot saw the person, slowed near them, and stood while they crossed in front
-    ticks = [r for r in run.events("nav_tick") if r["people"]]
+    ticks = [r for r in run.events("nav_tick") if r.get("people")]  # (docking's ticks list no people)
     assert ticks, "the walker was never tracked as a person"
     assert min(r["scale"] for r in ticks) <= 0.5
     gaps = {round(r["t"], 2): min(r["gaps"]) for r in truth if r["event"] == "truth"}
@@ -94,11 +95,16 @@ def test_an_unmapped_box_in_a_corridor_is_passed_by_another_route(tmp_path: Path
     run = run_fetch(tmp_path, [2], config=cfg)
     _delivered(run, "box_2")
     plans = [r for r in run.events("nav_plan") if r.get("label") == "search location 1"]
-    first, second = plans[0], plans[1]
-    # planned on the map through the strip east of the desk (x > 8.35), re-planned once the
-    # lidar saw the parcel, through the 1.2 m corridor west of it (x < 7.65)
-    assert first["why"] == "start" and all(x > 8.35 for x, _ in first["points"])
-    assert second["why"] == "blocked" and any(x < 7.65 for x, _ in second["points"])
+    first = plans[0]
+    # the map's way is the strip east of the desk (x > 8.35); the robot goes through the
+    # 1.2 m corridor west of it (x < 7.65): re-planned once the lidar saw the parcel, or
+    # planned that way from the start when the search's first look round (whose scans
+    # feed the tracks and the costmap, skills/search.py) had seen it already
+    assert first["why"] == "start"
+    if all(x > 8.35 for x, _ in first["points"]):
+        assert plans[1]["why"] == "blocked" and any(x < 7.65 for x, _ in plans[1]["points"])
+    else:
+        assert any(x < 7.65 for x, _ in first["points"])
     truth = _truth(tmp_path)
     assert truth[-1]["contacts"] == 0 or set(truth[-1]["contact_bodies"]) <= {"depot_wall_py"}, truth[-1]
     ticks = [r for r in truth if r["event"] == "truth"]
