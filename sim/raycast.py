@@ -130,9 +130,20 @@ class SceneRays:
             else:
                 self._moving.append((body, shapes))
         self._closed = {b for b in fixed} | {b for b, _ in self._moving}
+        #: the moving bodies' shapes in their frames, by kind: (body index, R, c, size, ids)
+        self._moving_local: dict[str, tuple[np.ndarray, ...]] = {}
+        for kind in ("box", "cyl", "plane"):
+            rows = [(i, size, local, b) for i, (b, shapes) in enumerate(self._moving)
+                    for k, size, local in shapes if k == kind]
+            if rows:
+                self._moving_local[kind] = (np.array([r[0] for r in rows]), np.array([r[2][0] for r in rows]),
+                                            np.array([r[2][1] for r in rows]), np.array([r[1] for r in rows]),
+                                            np.array([(r[3], -1) for r in rows]))
         self._others: list[tuple[int, int]] = []
         self._n_bodies = -1
         self._arrays = self._stack(self._fixed)
+        #: the fixed shapes a level scan at height z cuts, by z (a lidar keeps its height)
+        self._levels: dict[float, dict[str, tuple[np.ndarray, ...]]] = {}
 
     @staticmethod
     def _stack(prims: _Prims) -> dict[str, tuple[np.ndarray, ...]]:
@@ -142,6 +153,42 @@ class SceneRays:
             if idx:
                 out[kind] = (np.array([prims.R[i] for i in idx]), np.array([prims.c[i] for i in idx]),
                              np.array([prims.size[i] for i in idx]), np.array([prims.ids[i] for i in idx]))
+        return out
+
+    @staticmethod
+    def _cut(arrays: dict[str, tuple[np.ndarray, ...]], z: float) -> dict[str, tuple[np.ndarray, ...]]:
+        """The upright boxes and cylinders of ``arrays`` that span height ``z`` (as
+        rectangles and circles: ``rect``, ``circle``), and all the other shapes (by kind)."""
+        out: dict[str, tuple[np.ndarray, ...]] = {}
+        for kind, (R, c, size, ids) in arrays.items():
+            if kind == "plane":  # a level scan never meets a level plane
+                keep = np.flatnonzero(np.abs((R @ size[:, :, None])[:, 2, 0]) != 1.0)
+            else:  # boxes and cylinders
+                upright = np.abs(R[:, 2, 2]) == 1.0
+                cut = np.flatnonzero(upright & (np.abs(z - c[:, 2]) <= size[:, 2 if kind == "box" else 1]))
+                if cut.size:
+                    out[_PLANAR_NAME[kind]] = (R[cut], c[cut], size[cut], ids[cut])
+                keep = np.flatnonzero(~upright)
+            if keep.size:
+                out[kind] = (R[keep], c[keep], size[keep], ids[keep])
+        if "rect" in out:  # rectangle corners, for the bearing ranges
+            R, c, half, _ = out["rect"]
+            ux, uy = R[:, :2, 0] * half[:, 0:1], R[:, :2, 1] * half[:, 1:2]
+            corners = c[:, None, :2] + np.stack([ux + uy, ux - uy, -ux - uy, -ux + uy], axis=1)
+            out["rect"] = (*out["rect"], corners)
+        return out
+
+    def _moving_arrays(self) -> dict[str, tuple[np.ndarray, ...]]:
+        """The moving bodies' shapes where they are now."""
+        cid = self._cid
+        poses = [p.getBasePositionAndOrientation(b, physicsClientId=cid) for b, _ in self._moving]
+        pos = np.array([q[0] for q in poses])
+        rot = np.array([np.eye(3) if q[1] == (0.0, 0.0, 0.0, 1.0) else
+                        np.array(p.getMatrixFromQuaternion(q[1])).reshape(3, 3) for q in poses])
+        out = {}
+        for kind, (which, R, c, size, ids) in self._moving_local.items():
+            Rb = rot[which]
+            out[kind] = (Rb @ R, np.einsum("kij,kj->ki", Rb, c) + pos[which], size, ids)
         return out
 
     def _other_links(self) -> list[tuple[int, int]]:
@@ -171,44 +218,39 @@ class SceneRays:
         body = np.full(n, -1, dtype=np.int64)
         link = np.full(n, -1, dtype=np.int64)
         normal = np.zeros((n, 3))
-        arrays = dict(self._arrays)
-        if self._moving:
-            moving = _Prims()
-            for b, shapes in self._moving:
-                frame = _pose(*p.getBasePositionAndOrientation(b, physicsClientId=self._cid))
-                for kind, size, local in shapes:
-                    moving.add(kind, size, (b, -1), _compose(frame, local))
-            for kind, arr in self._stack(moving).items():
-                arrays[kind] = tuple(np.concatenate([x, y]) for x, y in zip(arrays[kind], arr)) if kind in arrays else arr
+        moving = self._moving_arrays() if self._moving else {}
         # a level scan (every ray horizontal, from one height): upright boxes and cylinders
         # that span that height are rectangles and circles in the scan's plane
         planar = not dirs[:, 2].any() and bool(np.all(starts[:, 2] == starts[0, 2]))
+        if planar:
+            z = float(starts[0, 2])
+            if z not in self._levels:
+                self._levels[z] = self._cut(self._arrays, z)
+            groups = dict(self._levels[z])
+            for kind, arr in self._cut(moving, z).items():
+                groups[kind] = tuple(np.concatenate([x, y]) for x, y in zip(groups[kind], arr)) if kind in groups else arr
+        else:
+            groups = dict(self._arrays)
+            for kind, arr in moving.items():
+                groups[kind] = tuple(np.concatenate([x, y]) for x, y in zip(groups[kind], arr)) if kind in groups else arr
         sorted_bearings = None
         if planar and origin is not None:
             bear = np.arctan2(dirs[:, 1], dirs[:, 0])
             order = np.argsort(bear, kind="stable")
             sorted_bearings = (bear[order], order)
         pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        for kind, (R, c, size, ids) in arrays.items():
-            if planar and kind in _PLANAR:
-                upright = np.abs(R[:, 2, 2]) == 1.0
-                sel = np.flatnonzero(upright & (np.abs(starts[0, 2] - c[:, 2]) <= size[:, 2 if kind == "box" else 1]))
-                rest = np.flatnonzero(~upright)
-                if sel.size:
-                    kernel, extent = _PLANAR[kind]
-                    Rs, cs, ss = R[sel], c[sel], size[sel]
-                    if sorted_bearings is not None:
-                        k, ray = _sector_pairs(sorted_bearings, *extent(origin, Rs, cs, ss))
-                    else:
-                        k, ray = np.divmod(np.arange(len(sel) * n), n)
-                    t, nrm = kernel(starts, dirs, Rs, cs, ss, k, ray)
-                    hit = t <= length
-                    pairs.append((t[hit], ray[hit], ids[sel][k[hit]], nrm[hit]))
+        for kind, (R, c, size, ids, *extra) in groups.items():
+            if kind in _HITS:
+                self._closest(_HITS[kind](starts, dirs, R, c, size), ids, length, best, body, link, normal)
+                continue
+            kernel, extent = _LEVEL[kind]
+            if sorted_bearings is not None:
+                k, ray = _sector_pairs(sorted_bearings, *extent(origin, R, c, size, *extra))
             else:
-                rest = np.arange(len(ids))
-            if rest.size:
-                self._closest(_HITS[kind](starts, dirs, R[rest], c[rest], size[rest]), ids[rest], length,
-                              best, body, link, normal)
+                k, ray = np.divmod(np.arange(len(ids) * n), n)
+            t, nrm = kernel(starts, dirs, R, c, size, k, ray)
+            hit = t <= length
+            pairs.append((t[hit], ray[hit], ids[k[hit]], nrm[hit]))
         t = np.concatenate([x[0] for x in pairs]) if pairs else np.zeros(0)
         if t.size:
             ray, pid, nrm = (np.concatenate(x) for x in list(zip(*pairs))[1:])
@@ -335,11 +377,10 @@ def _bearings(origin: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.nd
     return ref[:, 0] + off.min(axis=1) - 1e-9, ref[:, 0] + off.max(axis=1) + 1e-9
 
 
-def _rect_extent(origin: np.ndarray, R: np.ndarray, c: np.ndarray, half: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Bearing ranges of upright boxes' rectangles from ``origin`` (all bearings for a box
-    the origin is in or on)."""
-    ux, uy = R[:, :2, 0] * half[:, 0:1], R[:, :2, 1] * half[:, 1:2]
-    corners = c[:, None, :2] + np.stack([ux + uy, ux - uy, -ux - uy, -ux + uy], axis=1)
+def _rect_extent(origin: np.ndarray, R: np.ndarray, c: np.ndarray, half: np.ndarray,
+                 corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Bearing ranges of upright boxes' rectangles (``corners`` (K, 4, 2)) from ``origin``
+    (all bearings for a box the origin is in or on)."""
     lo, hi = _bearings(origin, corners)
     rel = origin[:2] - c[:, :2]
     inside = ((np.abs(np.einsum("ki,ki->k", rel, R[:, :2, 0])) <= half[:, 0] * (1 + 1e-9) + 1e-9)
@@ -483,5 +524,7 @@ def _plane_hits(starts: np.ndarray, dirs: np.ndarray, R: np.ndarray, c: np.ndarr
 
 
 _HITS = {"box": _box_hits, "cyl": _cyl_hits, "plane": _plane_hits}
+#: what a level scan makes of upright boxes and cylinders
+_PLANAR_NAME = {"box": "rect", "cyl": "circle"}
 #: level-scan kernels: (per-pair hit, bearing range)
-_PLANAR = {"box": (_rect_pairs, _rect_extent), "cyl": (_circle_pairs, _circle_extent)}
+_LEVEL = {"rect": (_rect_pairs, _rect_extent), "circle": (_circle_pairs, _circle_extent)}
