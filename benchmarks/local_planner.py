@@ -216,7 +216,7 @@ def closed_loop_rows() -> list[str]:
         rows.append(f"  {label:<24} reached {r.reached!s:<5} in {r.time:5.1f} s; smallest gap pole "
                     f"{r.min_pole_gap:+.3f} m, person {r.min_person_gap:+.3f} m (margin 0.05); re-plans "
                     f"{r.replans}; ticks {r.ticks}: command changed {r.filtered}, a barrier binding {r.barrier_active}, "
-                    f"infeasible (braked) {r.infeasible}")
+                    f"barriers not all kept (escape or brake) {r.infeasible}")
     return rows
 
 
