@@ -7,7 +7,9 @@ The simulation settings are the ``sim:`` section of a mission config (default
 ``--camera WxH`` and ``--physics-hz`` override them. Run:
 ``.venv/bin/python benchmarks/sim_speed.py [--config FILE] [--camera WxH] [--rate HZ]``.
 The last line is ``sim_realtime_factor: X``. Times are wall-clock (``perf_counter``) and
-process CPU (``process_time``, less disturbed by other jobs on a shared machine)."""
+process CPU (``process_time``, less disturbed by other jobs on a shared machine). The lidar
+line times a scan both ways in the same run: pybullet's ``rayTestBatch`` and the closed
+form of :mod:`mmexec.sim.raycast` (``sim.lidar.raycast``)."""
 
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ from mmexec.config.yamlload import InputError, YDict, load_yaml, load_yaml_text
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.sim.backend import SimRobot, build
+from mmexec.sim.capabilities import SimLidar
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -116,8 +119,20 @@ def main() -> None:
               f"({r.physics_steps - steps} physics steps run: physics pauses at rest)")
         wall, cpu = _median_ms(r.camera.frame, 5)
         print(f"camera_frame_ms: {cpu:.1f} cpu, {wall:.1f} wall ({w}x{h}, RGB + depth, TinyRenderer, shadows off)")
-        wall, cpu = _median_ms(r.lidar.scan, 20)
-        print(f"lidar_scan_ms: {cpu:.2f} cpu, {wall:.2f} wall ({r.lidar.beams} beams)")
+        lidar = r.lidar
+
+        def fresh_scan() -> None:
+            lidar._last = None  # a new cast each time (a scan in the same substep reuses its rays)
+            lidar.scan()
+
+        wall, cpu = _median_ms(fresh_scan, 20)
+        closed = SimLidar(r.core, lidar.beams, lidar.range_min, lidar.range_max, lidar.noise,
+                          reflectors=frozenset(x.name for x in r.world.spec.reflectors), raycast="closed_form")
+        real, lidar = lidar, closed
+        cwall, ccpu = _median_ms(fresh_scan, 20)
+        lidar = real
+        print(f"lidar_scan_ms: {cpu:.2f} cpu, {wall:.2f} wall ({r.lidar.beams} beams, raycast pybullet); "
+              f"{ccpu:.2f} cpu, {cwall:.2f} wall (raycast closed_form): {cpu / ccpu:.1f}x")
         checks, bumps = r.base.exact_checks, r.base.bumps
         metres, sim_s, wall_s, cpu_s, frames = drive(r, args.rate)
         print(f"drive: {metres:.1f} m in {sim_s:.1f} s sim, {wall_s:.2f} s wall, {cpu_s:.2f} s cpu, {frames} frames "
