@@ -100,6 +100,9 @@ BASE_JOINTS = ("base_x", "base_y", "base_yaw")
 #: nearly touches the robot itself, e.g. the LoCoBot's fingers by its arm base).
 ESCAPE_LIMIT = 0.06
 
+#: goals kept per plan() that failed only the navigation tolerance or the drive margin
+SPARE_GOALS = 12
+
 #: scene item name of the carried object while a goal's carry posture is checked
 CARRY_ITEM = "holistic_carried"
 #: [m] per side the carried object's box is grown by in that check: a held object sags
@@ -404,6 +407,9 @@ class HolisticPlanner:
         self.stop = threading.Event()
         #: (carry posture, object size, back-off [m]) while a plan() checks the carried object
         self._carry: tuple[np.ndarray, tuple[float, ...], float] | None = None
+        #: goals of a plan() valid at their pose but not within the navigation tolerance
+        #: or the drive margin: the last, goal-less attempt uses them too
+        self._spare: list[tuple[float, ...]] = []
 
     # ------------------------------------------------------------------ goals
     def _candidates(self, start: Pose2D, target: np.ndarray, lo: np.ndarray, hi: np.ndarray,
@@ -513,11 +519,13 @@ class HolisticPlanner:
                     continue
                 if self._carry is not None and not self._carry_clear(bx, by, byaw, qg, T_map_grasp, cfg):
                     continue
-            if not self._tolerant(bx, by, byaw, q[i], stow, T_map_pre, free_rotation, cfg):
+            goal = (bx, by, byaw, *(float(v) for v in q[i]))
+            if not self._tolerant(bx, by, byaw, q[i], stow, T_map_pre, free_rotation, cfg) \
+                    or not self.drive_clear(bx, by, byaw, stow, cfg.drive_margin):
+                if len(self._spare) < SPARE_GOALS:
+                    self._spare.append(goal)  # valid at the pose itself: the last attempt's fallback
                 continue
-            if not self.drive_clear(bx, by, byaw, stow, cfg.drive_margin):
-                continue
-            goals.append((bx, by, byaw, *(float(v) for v in q[i])))
+            goals.append(goal)
         return goals
 
     def _approach(self, T_pre: np.ndarray, T_grasp: np.ndarray, q_pre: np.ndarray,
@@ -664,12 +672,14 @@ class HolisticPlanner:
         if q_carry is not None and carry_size is not None and T_map_grasp is not None:
             self._carry = (np.clip(np.asarray(q_carry, dtype=float), lo[3:], hi[3:]),
                            tuple(float(v) for v in carry_size), float(back_off))
+        self._spare = []
         try:
             return self._plan(start, state0, q0, drive, target, lo, hi, T_map_pre, T_map_grasp, seeds,
                               free_approach_rotation, cfg, rng, t0, checks0)
         finally:
             m.exempt = None
             self._carry = None
+            self._spare = []
 
     def _plan(self, start: Pose2D, state0: np.ndarray, q0: np.ndarray, drive: np.ndarray, target: np.ndarray,
               lo: np.ndarray, hi: np.ndarray, T_map_pre: np.ndarray, T_map_grasp: np.ndarray | None,
@@ -699,6 +709,7 @@ class HolisticPlanner:
             new, with_ik = self._goal_states(poses, T_map_pre, T_map_grasp, seeds, drive, free_approach_rotation,
                                              acfg, rng)
             if not tolerant:
+                new = new + [g for g in self._spare if g not in new][:max(0, cfg.goal_count - len(new))]
                 loose.update(new)
             # goals accumulate over the attempts (a search that failed to reach them in its
             # time may reach them, or the new ones, in the next)
