@@ -182,8 +182,11 @@ class LocalPlanner:
         self.dwa.set_path(path, now)
 
     def reset_command(self) -> None:
-        """Forget the last command (the next tick starts from the measured velocity)."""
+        """Forget the last command (the next tick starts from the measured velocity), and
+        start a new stretch of patience with people (the drive calls this when it starts
+        and after each recovery)."""
         self._u = None
+        self.people_wait.reset()
 
     def observe(self, scan: LaserScan, pose: Pose2D) -> Circles:
         """Update the costmap and the tracks with ``scan``, taken with the base at

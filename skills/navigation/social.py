@@ -16,7 +16,7 @@ giving way, not stuck: people move on (a person who stops in the way, at a viewp
 by the goal, walks on within seconds; the sim's people turn round after 3 s). The
 patience is bounded: after ``patience`` seconds of people near the base in one stretch
 the wait is spent, the drive's stuck recovery counts again, and its re-plans go round
-the people standing there (:meth:`mmexec.skills.navigation.local_planner.LocalPlanner.replan_grid`).
+the people standing there; a new drive, or a recovery, starts a new stretch (:meth:`mmexec.skills.navigation.local_planner.LocalPlanner.replan_grid`).
 
 Frames: ``map``; metres, seconds. The cost is dimensionless (the DWA weighs it).
 """
@@ -99,6 +99,10 @@ class PeopleWait:
     @property
     def spent(self) -> bool:
         return self.waited > self.config.patience
+
+    def reset(self) -> None:
+        """A fresh stretch (a new drive, or after a recovery)."""
+        self.waited, self._last = 0.0, None
 
     def update(self, people: Circles, position: tuple[float, float], now: float, standing: bool = True) -> bool:
         """True while the base should wait for ``people`` (tracked people, ``map``) near

@@ -87,3 +87,7 @@ def test_the_wait_for_people_is_bounded():
     assert wait.waited == 0.0
     # a clock that stood still for a while counts as one short step
     assert wait.update(near, (0.0, 0.0), t + 30.0) and wait.waited == PeopleWait.MAX_STEP
+    # a new stretch (a new drive, a recovery) has its patience back
+    wait.waited = 99.0
+    wait.reset()
+    assert not wait.spent and wait.update(near, (0.0, 0.0), t + 31.0) and wait.waited == 0.0
