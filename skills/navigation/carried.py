@@ -37,7 +37,7 @@ from mmexec.drivers.interfaces import OccupancyGrid, Pose2D, Robot, SceneBox
 from mmexec.skills.manipulation.kinematics import ArmKinematics
 from mmexec.skills.navigation.costmap import RollingCostmap, StaticLayer
 
-__all__ = ["ITEM_PAD", "HeldItem", "ItemGuard", "held_item", "tall_layer"]
+__all__ = ["ITEM_PAD", "HeldItem", "ItemGuard", "held_item", "layer_floor", "tall_layer"]
 
 log = logging.getLogger(__name__)
 
@@ -101,6 +101,15 @@ def held_item(robot: Robot, base_radius: float) -> HeldItem | None:
     steps = np.arange(0.0, max(d - base_radius + radius, 0.0) + 1e-9, SPACING)
     points = tcp[:2] - steps[:, None] * u
     return HeldItem(points=points, radius=radius, floor=max(float(tcp[2]) - radius - HANG, 0.0), reach=d + radius)
+
+
+def layer_floor(floor: float) -> float:
+    """``floor`` [m] rounded down to the centimetre: the height a tall layer is built for
+    (:func:`tall_layer`; one layer serves every item within the same centimetre). Not
+    coarser: the LoCoBot's carried item reaches down to 0.166 m over the depot basket's
+    0.15 m walls, and a layer for 0.15 m kept the basket, so the item could never come
+    over it."""
+    return math.floor(floor * 100.0 + 1e-9) / 100.0
 
 
 def _inside(box: SceneBox, xy: np.ndarray, pad: float) -> np.ndarray:

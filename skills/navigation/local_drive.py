@@ -35,8 +35,9 @@ pick needs the stand-off to the tolerance the tracker reaches. Docking ends back
 DWA (with a re-plan) when something appears on that straight way.
 
 **Contact recovery** (``bumper_*``, ``cliff_*``): stop; pin the contact in the local
-costmap (an arc just outside the footprint at the sensor's bearing: the lidar cannot clear
-it, since what the bumper felt may be below the scan plane); back off; re-plan. More than
+costmap (an arc just outside the footprint at the sensor's bearing, unless it reaches an
+obstacle of the static map, which explains it: the lidar cannot clear it, since what the
+bumper felt may be below the scan plane); back off; re-plan. More than
 ``nav.recoveries`` contacts in one drive fail it (EXECUTION, naming the faults), and so
 does a bumper that stays pressed while the base tries to back off (the Kobuki driver
 refuses motion while one is).
@@ -93,7 +94,7 @@ from mmexec.drivers.interfaces import (
 )
 from mmexec.skills.base import FailureKind, SkillCancelled, SkillContext, SkillFailure
 from mmexec.skills.navigation.astar import line_is_free, plan_path, simplify_path
-from mmexec.skills.navigation.carried import ItemGuard, held_item, tall_layer
+from mmexec.skills.navigation.carried import ItemGuard, held_item, layer_floor, tall_layer
 from mmexec.skills.navigation.cbf import QpStatus
 from mmexec.skills.navigation.dwa import DwaStatus
 from mmexec.skills.navigation.grid import CostMap, inflate
@@ -582,12 +583,12 @@ class LocalDrive:
     def _item_guard(self) -> ItemGuard | None:
         """The guard of the item the gripper holds now (None: nothing held beyond the
         footprint), over the static layer of what reaches its height (cached in the world
-        model per map and height, the height rounded down to 5 cm)."""
+        model per map and height, the height rounded down to the centimetre)."""
         robot = self.ctx.robot
         item = held_item(robot, self.config.planner.limits.radius)
         if item is None or robot.occupancy is None:
             return None
-        floor = math.floor(item.floor / 0.05) * 0.05
+        floor = layer_floor(item.floor)
         cached = self.ctx.world.get(WORLD_TALL_LAYER)
         if cached is not None and cached[0] is robot.occupancy and cached[1] == floor:
             layer = cached[2]
@@ -1013,7 +1014,13 @@ class LocalDrive:
             yield from brake(ctx, base)
         pose = base.state().pose
         pts = contact_points(pose, faults, self.config.planner.limits.radius)
-        self.planner.costmap.pin(pts)
+        # a contact the map explains (its arc reaches a mapped obstacle) is no news, as
+        # for the lidar's hits: a bump against the depot's low basket pinned marks that a
+        # held item then took for something tall, blocking the stop for good
+        cm = self.planner.costmap
+        if np.any(cm.static.clearance_at(pts) <= cm.config.static_tolerance):
+            pts = pts[:0]
+        cm.pin(pts)
         ctx.emit("nav_contact", faults=sorted(faults), attempt=self.contacts, of=self.config.recoveries,
                  pose=_rounded([pose.x, pose.y, pose.theta]), marked=_rounded(pts.tolist()), node=ctx.node_path)
         log.warning("%s: %s at (%.2f, %.2f): backing off and re-planning", self.label, names, pose.x, pose.y)

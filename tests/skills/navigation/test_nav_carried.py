@@ -18,7 +18,14 @@ from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import GraspState, Pose2D, SceneBox
 from mmexec.drivers.mock.robot import MockRobot
 from mmexec.skills.base import SkillStatus, run_skill
-from mmexec.skills.navigation.carried import ITEM_PAD, HeldItem, ItemGuard, held_item, tall_layer
+from mmexec.skills.navigation.carried import (
+    ITEM_PAD,
+    HeldItem,
+    ItemGuard,
+    held_item,
+    layer_floor,
+    tall_layer,
+)
 from mmexec.skills.navigation.costmap import RollingCostmap, StaticLayer
 
 #: the LoCoBot profile's carry pose (config/locobot_sim.yaml)
@@ -144,3 +151,35 @@ def test_a_drive_with_an_item_held_keeps_it_clear_of_a_box_beside_the_goal(event
     # the path's last stretch runs along the goal's heading into the goal
     last = _of(events, "nav_plan")[0]["points"]
     assert last[-1] == [3.0, 1.5] and last[-2][0] == pytest.approx(3.0, abs=0.03) and last[-2][1] < 1.1
+
+
+def test_the_carried_item_passes_over_the_depot_basket():
+    """The lab's basket walls are 0.15 m high; the LoCoBot's carried item reaches down
+    to 0.166 m: the layer built for the item leaves the basket out (a layer for a floor
+    rounded to 5 cm, 0.15 m, kept it, and the guard stopped every drive short of the
+    depot stop)."""
+    robot = MockRobot()
+    _hold(robot, CARRY)
+    item = held_item(robot, KOBUKI_RADIUS)
+    assert item is not None and 0.15 < item.floor < 0.2
+    basket = (1.0, 1.0, 1.4, 1.3)
+    grid = room((4.0, 2.5), boxes=(basket,))
+    tall = tall_layer(grid, [_box(*basket, 0.15, "basket")], layer_floor(item.floor))
+    assert tall.clearance_at(np.array([[1.2, 1.15]]))[0] > 0.3
+    assert layer_floor(0.166) == 0.16 and layer_floor(0.15) == 0.15
+
+
+def test_a_drive_with_an_item_held_brings_it_over_a_low_basket(events):
+    """The depot: the stop faces a basket 0.15 m high whose middle is 0.43 m ahead of it,
+    where the carried item is released. The map has the basket; the robot's scene says
+    it is low, so the drive brings the item over it to the stop."""
+    basket = (2.8, 1.78, 3.2, 2.08)
+    robot = _robot(room(boxes=(basket,)), Pose2D(1.0, 1.0, 0.0))
+    robot.scene = (_box(*basket, 0.15, "basket"),)
+    _hold(robot, CARRY)
+    ctx = _ctx(robot, events)
+    run = run_skill("navigate", ctx, {"x": 3.0, "y": 1.5, "theta": math.pi / 2},
+                    step=lambda: robot.spin(0.05), max_ticks=6000)
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    end = robot.base.pose
+    assert end.distance_to(Pose2D(3.0, 1.5)) <= 0.05 and abs(wrap_angle(end.theta - math.pi / 2)) <= 0.05
