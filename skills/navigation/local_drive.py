@@ -715,15 +715,21 @@ class LocalDrive:
 
     # ------------------------------------------------------------------ docking
     def _way_clear(self, pose: Pose2D) -> bool:
-        """The straight way from ``pose`` to the goal keeps the footprint radius from every
-        costmap obstacle and stays out of every non-person circle's safety radius (people
-        are the filter's business: they move on)."""
+        """The straight way from ``pose`` to the goal keeps the footprint radius and the
+        margin from every costmap obstacle (or as much as the base and the goal have,
+        when either has less) and stays out of every non-person circle's safety radius
+        (people are the filter's business: they move on). With the radius alone, a dock
+        into the lab's depot stop from the east grazed the basket's corner and the
+        bumper fired."""
         gx, gy = self.goal.x, self.goal.y
         d = math.hypot(gx - pose.x, gy - pose.y)
         n = max(2, math.ceil(d / (0.5 * self.planner.costmap.resolution)) + 1)
         f = np.linspace(0.0, 1.0, n)[:, None]
         pts = np.array([pose.x, pose.y]) + f * np.array([gx - pose.x, gy - pose.y])
-        if np.any(self.planner.costmap.clearance_at(pts[1:]) < self.config.planner.limits.radius):
+        clear = self.planner.costmap.clearance_at(pts)
+        lim = self.config.planner.limits
+        need = max(lim.radius, min(lim.radius + self.config.margin, float(clear[0]), float(clear[-1])))
+        if np.any(clear[1:] < need - 1e-6):
             return False
         c = self.planner.circles_at(self.ctx.clock.now())
         c = c.select(~c.person)
