@@ -140,7 +140,7 @@ class SceneRays:
                                             np.array([r[2][1] for r in rows]), np.array([r[1] for r in rows]),
                                             np.array([(r[3], -1) for r in rows]))
         self._others: list[tuple[int, int]] = []
-        self._n_bodies = -1
+        self._n_bodies: tuple[int, int] = (-1, -1)
         self._arrays = self._stack(self._fixed)
         #: the fixed shapes a level scan at height z cuts, by z (a lidar keeps its height)
         self._levels: dict[float, dict[str, tuple[np.ndarray, ...]]] = {}
@@ -192,10 +192,12 @@ class SceneRays:
         return out
 
     def _other_links(self) -> list[tuple[int, int]]:
-        """Every (body, link) pybullet has to cast against (refreshed when bodies come or go)."""
+        """Every (body, link) pybullet has to cast against (refreshed when bodies come or go:
+        body ids only grow, so the count and the newest id tell)."""
         cid = self._cid
         n = p.getNumBodies(physicsClientId=cid)
-        if n != self._n_bodies:
+        key = (n, p.getBodyUniqueId(n - 1, physicsClientId=cid) if n else -1)
+        if key != self._n_bodies:
             others = []
             for k in range(n):
                 body = p.getBodyUniqueId(k, physicsClientId=cid)
@@ -203,7 +205,7 @@ class SceneRays:
                     others += [(body, li) for li in range(-1, p.getNumJoints(body, physicsClientId=cid))
                                if p.getCollisionShapeData(body, li, physicsClientId=cid)]
             self._others = others + sorted(self._pybullet_links)
-            self._n_bodies = n
+            self._n_bodies = key
         return self._others
 
     def cast(self, starts: np.ndarray, ends: np.ndarray, dirs: np.ndarray, length: float,

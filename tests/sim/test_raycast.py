@@ -168,3 +168,23 @@ def test_an_unknown_raycast_is_a_config_error(sim_section):
     assert parse_section(sim_section("lidar: {raycast: closed_form}\n")).lidar.raycast == "closed_form"
     with pytest.raises(InputError, match=r"config.yaml:1:.*raycast"):
         parse_section(sim_section("lidar: {raycast: fast}\n"))
+
+
+def test_a_body_made_after_the_first_scan_is_seen():
+    r = _robot("locobot_wx250s", "lab", raycast="closed_form")
+    try:
+        o, _, _, _, _ = _scan_rays(r)
+        before = r.lidar.scan()
+        yaw = r.core.true_pose.theta + 0.5
+        col = p.createCollisionShape(p.GEOM_BOX, halfExtents=[0.05, 0.05, 0.5], physicsClientId=r.cid)
+        p.createMultiBody(0, col, -1, [o[0] + 0.6 * math.cos(yaw), o[1] + 0.6 * math.sin(yaw), 0.5],
+                          physicsClientId=r.cid)
+        r.spin(1 / r.clock.hz)
+        after = r.lidar.scan()
+        assert before is not None and after is not None
+        def near(scan) -> int:  # beams ending 0.5-0.6 m out: on the new post's face
+            return int(((scan.ranges > 0.5) & (scan.ranges < 0.6)).sum())
+
+        assert near(after) >= near(before) + 2
+    finally:
+        r.close()
