@@ -371,25 +371,34 @@ class LocalDrive:
         reaches its height all along the stretch and in the turn to the goal's heading
         at its end, as a fork truck comes into a rack: arriving from the side, the turn
         at the goal swings the item through whatever stands beside the stop (the lab's
-        crate by the depot). None without an item, when the base is already that near
-        the goal, or when no such stretch is free on ``cm``."""
+        crate by the depot). None without an item, when no such stretch is free on
+        ``cm``, or when the base is already that near the goal and the straight way in
+        from where it is keeps the item clear (otherwise it goes back out to the point:
+        a base that came in from the side stood by the stop for good)."""
         guard = self._guard
         if guard is None:
             return None
         reach = guard.item.reach - self.config.planner.limits.radius
-        if math.hypot(gx - start.x, gy - start.y) <= reach + ITEM_APPROACH:
+        if math.hypot(gx - start.x, gy - start.y) <= reach + ITEM_APPROACH and \
+                self._stretch_clear(guard, start.x, start.y, gx, gy, math.atan2(gy - start.y, gx - start.x)):
             return None
         for d, delta in itertools.product((reach + ITEM_APPROACH, reach + ITEM_APPROACH / 4), ITEM_APPROACH_TURNS):
             th = self.goal.theta + delta
             px, py = gx - d * math.cos(th), gy - d * math.sin(th)
             if not cm.is_free(px, py) or not line_is_free(cm, (px, py), (gx, gy)):
                 continue
-            f = np.linspace(0.0, 1.0, max(2, math.ceil(d / 0.05) + 1))
-            stretch = np.stack([px + f * (gx - px), py + f * (gy - py), np.full(f.size, th)], axis=1)
-            if float(guard.gaps(stretch).min()) < guard.margin or not guard.turn_clear(Pose2D(gx, gy, th), -delta):
-                continue
-            return px, py
+            if self._stretch_clear(guard, px, py, gx, gy, th):
+                return px, py
         return None
+
+    def _stretch_clear(self, guard: ItemGuard, px: float, py: float, gx: float, gy: float, th: float) -> bool:
+        """Whether driving straight from ``(px, py)`` to ``(gx, gy)`` heading ``th`` [rad],
+        then turning to the goal's heading there, keeps the held item clear."""
+        d = math.hypot(gx - px, gy - py)
+        f = np.linspace(0.0, 1.0, max(2, math.ceil(d / 0.05) + 1))
+        stretch = np.stack([px + f * (gx - px), py + f * (gy - py), np.full(f.size, th)], axis=1)
+        return float(guard.gaps(stretch).min()) >= guard.margin and \
+            guard.turn_clear(Pose2D(gx, gy, th), wrap_angle(self.goal.theta - th))
 
     def _follow_path(self, path: list[tuple[float, float]], why: str, now: float) -> None:
         """Follow ``path`` from now: published (``nav.path``) and logged (``nav_plan``)
@@ -739,8 +748,18 @@ class LocalDrive:
         return True
 
     def _can_dock(self, pose: Pose2D) -> bool:
-        return (math.hypot(self.goal.x - pose.x, self.goal.y - pose.y) <= self.config.dock_distance
-                and self._way_clear(pose))
+        """Within ``dock_distance`` of the goal along a clear straight way; with an item
+        held, only where that way and the turn at its end keep the item clear (docking
+        from the side cut the approach stretch short and pinned the item against the
+        crate by the lab's depot)."""
+        if math.hypot(self.goal.x - pose.x, self.goal.y - pose.y) > self.config.dock_distance \
+                or not self._way_clear(pose):
+            return False
+        guard = self._guard
+        if guard is None or math.hypot(self.goal.x - pose.x, self.goal.y - pose.y) <= ITEM_DOCK_NEAR:
+            return True
+        return self._stretch_clear(guard, pose.x, pose.y, self.goal.x, self.goal.y,
+                                   math.atan2(self.goal.y - pose.y, self.goal.x - pose.x))
 
     def _dock(self) -> Generator[None, None, bool]:
         """Pure pursuit to the goal along the straight way, heading aligned at the end,
