@@ -78,6 +78,10 @@ PLACE_RAISES = (0.0, 0.05, 0.10)
 #: not a box or a can standing up (1.6-1.8; 2.0 as held, each side 1 cm smaller).
 ELONGATED = 3.0
 
+#: The tool axis the fingers travel along (the WX250s and the Robotiq alike:
+#: skills/manipulation/grasp.py).
+FINGER_AXIS = 1
+
 #: Releases at the place pose before place gives up on an item that stays in the gripper:
 #: after each release and retract the fingers close to stow; closing on something means the
 #: released item came along (caught on the fingers), so it is taken back down and let go again.
@@ -260,13 +264,14 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
                                          retract=prof.place_retract, grasp_height=prof.grasp_height))
                   for raise_by in PLACE_RAISES]
     q = measured_joints(ctx)
+    T_tool = ws.kin.fk(q)
     item = ws.scene.items.get(name)
-    if item is not None and item.attached and _stood_up(item.size, item.T, candidates[0][1].place):
-        # the nominal pose would stand the elongated item on end (a top-grasped tool on the
-        # UR, whose carry holds it lying across the fingers): release it lying, from above
-        # (only where the arm can also retract from it: the WX250s reaches a top-down
-        # release over the basket but cannot rise from it holding the tool vertical)
-        T_tool = ws.kin.fk(q)
+    if (item is not None and item.attached and _resting_on_a_finger(T_tool)
+            and _stood_up(item.size, item.T, candidates[0][1].place)):
+        # the item rests on the lower finger (the UR carry: fingers closing vertically) and
+        # the nominal pose would stand it on end, hanging in a horizontal pinch: release it
+        # lying, from above, as carried (only where the arm can also retract from there).
+        # A carry that pinches horizontally already (the LoCoBot's) keeps the nominal release.
         top_down = [(raise_by, td) for raise_by, nominal in candidates
                     for td in _top_down(T_tool, item.T, (T_am @ _raised(T_map_place, raise_by))[:3, 3],
                                         nominal.retract[:3, 3] - nominal.place[:3, 3], ws.kin.approach_axis)]
@@ -364,6 +369,13 @@ def _rolled(T: np.ndarray, approach_axis: int, angle: float) -> np.ndarray:
     R = np.eye(4)
     R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
     return T @ R
+
+
+def _resting_on_a_finger(T_tool: np.ndarray) -> bool:
+    """Whether the fingers of the tool at ``T_tool`` (arm base, z up) close within 45
+    degrees of the vertical, so a held item rests on the lower one. Both arms' fingers
+    travel along the tool's y (skills/manipulation/grasp.py)."""
+    return abs(float(T_tool[2, FINGER_AXIS])) > math.cos(math.radians(45.0))
 
 
 def _stood_up(size: Sequence[float], T_tool_item: np.ndarray, T_place: np.ndarray) -> bool:

@@ -76,3 +76,14 @@ def test_the_release_from_above_keeps_the_tool_lying_with_its_centre_at_the_plac
     assert turns == [-90, 0, 90, 180] or turns == [-180, -90, 0, 90]
     # the first is within the UR5e's reach
     assert kin.ik(poses[0].place, CARRY) is not None
+
+
+def test_only_an_item_resting_on_the_lower_finger_is_released_from_above():
+    """The UR carry closes the fingers vertically (the tool lies on the lower one): released
+    from above. The LoCoBot's carry pinches horizontally, as its nominal place pose does:
+    the nominal release, whatever the item."""
+    from mmexec.skills.fetch.arm import _resting_on_a_finger
+    from mmexec.skills.manipulation.kinematics import wx250s
+
+    assert _resting_on_a_finger(ur5e().fk(CARRY))
+    assert not _resting_on_a_finger(wx250s(locobot=True).fk([0.0, -0.2, 0.6, 0.0, 0.5, 0.0]))  # locobot carry
