@@ -821,8 +821,12 @@ class LocalDrive:
                 self._no_dock_until = now + ITEM_DOCK_PAUSE
                 self.planner.reset_command()
                 return False
-            if tracker.phase != phase:
-                phase, best, t_best = tracker.phase, math.inf, now
+            if (tracker.phase == "align") != (phase == "align"):
+                # the measure of progress changes (distance, then heading); turning to the
+                # goal and driving to it share one: a tracker swapping between them as
+                # the filter held it restarted the count for ever (90 s timeouts)
+                best, t_best = math.inf, now
+            phase = tracker.phase
             progress = (abs(wrap_angle(self.goal.theta - st.pose.theta)) if phase == "align"
                         else math.hypot(self.goal.x - st.pose.x, self.goal.y - st.pose.y))
             if progress < best - 0.01:
