@@ -8,8 +8,10 @@ the requested item (``DIR/trials.csv``), the trial's outcome, and the truth log'
 ``grasp`` records (sim/truth.py: which parts of an object the gripper's pads touched when
 they closed on it) and ``objects_end`` record (where each object ended up: in the depot
 basket or not, the delivery the mission's own outcome cannot see). A trial of a dangerous item (an object with a part sim/objects.py
-marks dangerous) counts as *on the dangerous part* when the last grasp of that item
-touched that part. Prints one line per item and the totals; the last line is
+marks dangerous) counts as *on the dangerous part* when the pick's grasp of that item
+touched that part: the last grasp before the trial's first ``place`` started (its event log
+``DIR/trials/NNNN.jsonl``; the same sim clock), not a close of ``place``'s own check that
+caught the released item; without the log, the last grasp. Prints one line per item and the totals; the last line is
 ``dangerous_part_contact: X`` (fraction of the dangerous-item trials).
 """
 
@@ -40,6 +42,17 @@ def _in_depot(campaign: Path, xyz: list[float]) -> bool:
     return False
 
 
+def _place_start(log: Path) -> float | None:
+    """Sim time [s] at which the trial's first ``place`` skill started; None without one."""
+    if not log.is_file():
+        return None
+    for line in log.read_text().splitlines():
+        rec = json.loads(line)
+        if rec.get("event") == "skill_start" and rec.get("skill") == "place":
+            return float(rec["t"])
+    return None
+
+
 def score(campaign: Path) -> tuple[dict[str, list[int]], int, int]:
     """Per item: [trials, successes, dangerous-part contacts, in the basket by the truth];
     and the dangerous trials and contacts over all items."""
@@ -59,7 +72,9 @@ def score(campaign: Path) -> tuple[dict[str, list[int]], int, int]:
             if not dangerous.get(item):
                 continue
             n_dangerous += 1
-            grasps = [g for g in records if g.get("event") == "grasp" and g.get("item") == item]
+            t_place = _place_start(campaign / "trials" / f"{int(row['trial']):04d}.jsonl")
+            grasps = [g for g in records if g.get("event") == "grasp" and g.get("item") == item
+                      and (t_place is None or float(g.get("t", 0.0)) < t_place)]
             if grasps and dangerous[item] & set(grasps[-1]["parts"]):
                 r[2] += 1
                 hits += 1
