@@ -25,7 +25,6 @@ on a shared machine the CPU figures are the ones to compare)."""
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import resource
 import subprocess
@@ -35,6 +34,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from mmexec.executive.eventlog import read_log
 
 ROOT = Path(__file__).resolve().parent.parent
 #: event-log fields that differ between equal runs (tests/e2e/test_same_behaviour.py)
@@ -109,21 +110,16 @@ def run_trial(pythonpath: Path, cwd: Path, config: Path, seed: int, item: int, l
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if res.returncode not in (0, 1) or not log.exists():
         raise SystemExit(f"trial_speed: seed {seed}: mmexec run exited {res.returncode}: {res.stderr.strip()[-400:]}")
-    recs = [json.loads(line) for line in log.read_text().splitlines()]
+    recs = read_log(log)
     outcome = next((r["outcome"] for r in reversed(recs) if r.get("event") == "request_end"), "none")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     return Trial(float(recs[-1]["t"]), wall, cpu, outcome, log)
 
 
 def same_log(a: Path, b: Path) -> bool:
+    """Whether two event logs hold the same records, the VOLATILE fields left out."""
     def norm(p: Path) -> list[dict[str, Any]]:
-        out = []
-        for line in p.read_text().splitlines():
-            r = json.loads(line)
-            for k in VOLATILE:
-                r.pop(k, None)
-            out.append(r)
-        return out
+        return [{k: v for k, v in r.items() if k not in VOLATILE} for r in read_log(p)]
 
     return norm(a) == norm(b)
 
