@@ -397,7 +397,8 @@ class SimRobot(Robot):
             if self._kidnap_pending:
                 self._kidnap()
             if core.people is not None:
-                core.people.step(dt, (core.true_pose.x, core.true_pose.y), core.info.footprint_radius)
+                core.people.step(dt, (core.true_pose.x, core.true_pose.y), core.info.footprint_radius,
+                                 core.clearance.clear if core.clearance is not None else None)
             self.base.update(dt)
             if not rest:
                 self.arm.update(dt)

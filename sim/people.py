@@ -22,8 +22,16 @@ closer than :data:`YIELD_GAP` to the robot's footprint circle (and closer than t
 so they never walk into the robot; a contact with a person is the robot's doing. A
 person kept waiting for :data:`PATIENCE` seconds turns round and walks their loop the
 other way (someone the robot waits for, and who waits for the robot, would otherwise
-stand there for ever). People do not avoid each other (they may overlap; neither the
-lidar nor the robot minds).
+stand there for ever). A person who turned round and is blocked again before taking a
+step (cornered: the robot stands where both ways of their loop pass it, by a waypoint)
+walks round the robot instead: each substep a step along the tangent of the circle round
+the robot's centre (the side nearer where they were going; never closer to the robot,
+and only where the static geometry leaves their radius + :data:`ROUND_CLEAR`, when the
+caller gives the clearance), then straight on towards the end of the leg they are on,
+where the loop resumes. Before, such a person stood by the robot for minutes: in the
+LoCoBot crowd campaigns a person stood by home or a viewpoint for the rest of the trial
+and the robot, which could not reach its goal past them, timed out (3 of 200 trials).
+People do not avoid each other (they may overlap; neither the lidar nor the robot minds).
 
 Frames: ``map``; metres, seconds. Sim-only; skills never see this module.
 """
@@ -31,7 +39,7 @@ Frames: ``map``; metres, seconds. Sim-only; skills never see this module.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,13 +48,15 @@ import pybullet as p
 from mmexec.sim.scene import GROUP_ITEM, GROUP_QUERY, GROUP_STATIC
 from mmexec.sim.world import Person
 
-__all__ = ["YIELD_GAP", "SimPeople", "Walk"]
+__all__ = ["PATIENCE", "ROUND_CLEAR", "YIELD_GAP", "SimPeople", "Walk"]
 
 #: [m] the smallest gap a person leaves between themselves and the robot's footprint circle
 #: (more than the robot's own safety margin, so a person who waits is never inside it)
 YIELD_GAP = 0.3
 #: [s] how long a person waits for the robot before turning round
 PATIENCE = 3.0
+#: [m] room a person walking round the robot keeps from the static geometry beyond their radius
+ROUND_CLEAR = 0.05
 #: RGBA of a person's body (a dark blue coat: a distinct colour in camera frames)
 _COLOUR = (0.15, 0.2, 0.45, 1.0)
 
@@ -56,8 +66,10 @@ class Walk:
     """Where one person is in their walk: ``phase`` (``trigger``, ``delay``, ``walk`` or
     ``pause``), the leg (from waypoint ``leg`` to the next), ``along`` [m] on it from
     waypoint ``leg``, the seconds left of the delay or pause (``timer``), the position
-    ``xy`` [m] in ``map``, the ``direction`` along the loop (+1 as given, -1 reversed)
-    and how long they have been ``waiting`` for the robot [s]."""
+    ``xy`` [m] in ``map``, the ``direction`` along the loop (+1 as given, -1 reversed),
+    how long they have been ``waiting`` for the robot [s], whether they ``turned`` round
+    for it and have not stepped since, and whether they are ``rounding`` it (off their
+    leg, walking round the robot and then straight to the leg's end)."""
 
     phase: str
     leg: int
@@ -66,6 +78,9 @@ class Walk:
     xy: tuple[float, float]
     direction: int = 1
     waiting: float = 0.0
+    turned: bool = False
+    rounding: bool = False
+    side: float = 0.0
 
 
 class SimPeople:
@@ -112,10 +127,13 @@ class SimPeople:
         c = self.positions()
         return np.hypot(c[:, 0] - x, c[:, 1] - y) - self.radii - radius
 
-    def step(self, dt: float, robot_xy: tuple[float, float], robot_radius: float) -> None:
+    def step(self, dt: float, robot_xy: tuple[float, float], robot_radius: float,
+             clear: Callable[[float, float, float], bool] | None = None) -> None:
         """Advance every person by ``dt`` [s] of clock time, the robot's true centre at
         ``robot_xy`` [m] with a footprint of ``robot_radius`` [m], and put the bodies
-        there."""
+        there. ``clear(x, y, r)``: whether a disk of radius ``r`` [m] at ``(x, y)`` is
+        clear of the static geometry (:meth:`mmexec.sim.clearance.ClearanceMap.clear`),
+        for a person walking round the robot (None: anywhere)."""
         for i, pe in enumerate(self.people):
             w = self.walks[i]
             if w.phase == "trigger":
@@ -128,7 +146,7 @@ class SimPeople:
                 if w.timer <= 0.0:
                     w.phase, w.timer = "walk", 0.0
                 continue
-            self._walk(i, pe, w, dt, robot_xy, robot_radius)
+            self._walk(i, pe, w, dt, robot_xy, robot_radius, clear)
         for i, w in enumerate(self.walks):
             if w.xy != self._placed[i]:
                 pe = self.people[i]
@@ -137,32 +155,79 @@ class SimPeople:
                 self._placed[i] = w.xy
 
     def _walk(self, i: int, pe: Person, w: Walk, dt: float, robot_xy: tuple[float, float],
-              robot_radius: float) -> None:
+              robot_radius: float, clear: Callable[[float, float, float], bool] | None) -> None:
         """One substep of walking for person ``i`` (the rules of the module docstring)."""
         legs = self._legs[i]
         leg = w.leg
-        along = w.along + w.direction * pe.speed * dt
-        arrived = along >= legs[leg][2] - 1e-9 if w.direction > 0 else along <= 1e-9
-        if arrived and w.direction > 0:
-            leg, along = (leg + 1) % len(legs), 0.0
-            xy = legs[leg][0]
-        elif arrived:  # reversed: at waypoint ``leg``, next down the previous leg from its end
-            xy = legs[leg][0]
-            leg = (leg - 1) % len(legs)
-            along = legs[leg][2]
+        arrived = False
+        if w.rounding:  # off the leg: straight on to its end in the walking direction
+            tx, ty = legs[leg][1] if w.direction > 0 else legs[leg][0]
+            d = math.hypot(tx - w.xy[0], ty - w.xy[1])
+            step = pe.speed * dt
+            arrived = d <= step
+            xy = (tx, ty) if arrived else (w.xy[0] + step * (tx - w.xy[0]) / d, w.xy[1] + step * (ty - w.xy[1]) / d)
+            along = w.along
+            if arrived and w.direction > 0:
+                leg, along = (leg + 1) % len(legs), 0.0
+            elif arrived:
+                leg = (leg - 1) % len(legs)
+                along = legs[leg][2]
         else:
-            (ax, ay), (bx, by), length = legs[leg]
-            f = along / length
-            xy = (ax + f * (bx - ax), ay + f * (by - ay))
+            along = w.along + w.direction * pe.speed * dt
+            arrived = along >= legs[leg][2] - 1e-9 if w.direction > 0 else along <= 1e-9
+            if arrived and w.direction > 0:
+                leg, along = (leg + 1) % len(legs), 0.0
+                xy = legs[leg][0]
+            elif arrived:  # reversed: at waypoint ``leg``, next down the previous leg from its end
+                xy = legs[leg][0]
+                leg = (leg - 1) % len(legs)
+                along = legs[leg][2]
+            else:
+                (ax, ay), (bx, by), length = legs[leg]
+                f = along / length
+                xy = (ax + f * (bx - ax), ay + f * (by - ay))
         rx, ry = robot_xy
         gap_new = math.hypot(xy[0] - rx, xy[1] - ry) - pe.radius - robot_radius
         if gap_new < YIELD_GAP:
             gap_now = math.hypot(w.xy[0] - rx, w.xy[1] - ry) - pe.radius - robot_radius
-            if gap_new < gap_now:  # stand aside: the robot is in the way
-                w.waiting += dt
+            if gap_new < gap_now:  # the robot is in the way
+                if w.turned or w.rounding:
+                    q = self._round_step(pe, w, xy, robot_xy, pe.speed * dt, clear)
+                    if q is not None:  # cornered: walk round it
+                        w.xy, w.rounding, w.turned, w.waiting = q, True, False, 0.0
+                        return
+                w.waiting += dt  # stand aside
                 if w.waiting >= PATIENCE:
-                    w.direction, w.waiting = -w.direction, 0.0
+                    w.direction, w.waiting, w.turned = -w.direction, 0.0, True
                 return
+        if xy != w.xy:
+            w.turned = False
+        if arrived:
+            w.rounding, w.side = False, 0.0
         w.xy, w.leg, w.along, w.waiting = xy, leg, along, 0.0
         if arrived and pe.pause > 0:
             w.phase, w.timer = "pause", pe.pause
+
+    @staticmethod
+    def _round_step(pe: Person, w: Walk, towards: tuple[float, float], robot_xy: tuple[float, float], step: float,
+                    clear: Callable[[float, float, float], bool] | None) -> tuple[float, float] | None:
+        """Where person ``pe`` at ``w.xy``, who wanted to step to ``towards`` [m], steps
+        instead to walk round the robot centred at ``robot_xy``: ``step`` [m] along the
+        tangent of the circle round it (which never comes closer to the robot), on the
+        side ``w.side`` kept from the first such step (at first the side nearer
+        ``towards``), or the other where ``clear`` does not leave the person's radius +
+        :data:`ROUND_CLEAR` (the side then kept); None when neither does."""
+        here = w.xy
+        ux, uy = robot_xy[0] - here[0], robot_xy[1] - here[1]
+        n = math.hypot(ux, uy)
+        if n < 1e-9:
+            return None
+        tx, ty = uy / n, -ux / n  # anticlockwise round the robot
+        if w.side == 0.0:
+            w.side = 1.0 if tx * (towards[0] - here[0]) + ty * (towards[1] - here[1]) >= 0.0 else -1.0
+        for s in (w.side, -w.side):
+            q = (here[0] + s * step * tx, here[1] + s * step * ty)
+            if clear is None or clear(q[0], q[1], pe.radius + ROUND_CLEAR):
+                w.side = s
+                return q
+        return None

@@ -285,3 +285,41 @@ def test_the_truth_log_records_clearance_people_and_contacts(tmp_path, sim_secti
 def test_an_unknown_field_in_the_truth_log_name_is_a_located_error(sim_section):
     with pytest.raises(InputError, match=r"config.yaml:1:12: sim.truth_log: 'x_\{run\}.jsonl': only \{seed\}"):
         build(sim_section("truth_log: x_{run}.jsonl\n"), profile={}, seed=1, options={})
+
+
+def test_a_cornered_person_walks_round_the_robot():
+    """A robot standing by a waypoint where both legs of the loop pass it: the person
+    waits, turns round, is blocked again at once, and walks round the robot (never
+    closer to it, on the side the static geometry leaves free) on to the next waypoint,
+    instead of standing there for ever (the crowd campaigns' 90 s timeouts)."""
+    import pybullet as p
+
+    robot = (2.6, 2.0)
+    w_pt, x_pt, y_pt = (2.0, 2.0), (4.0, 2.5), (4.0, 1.5)
+    for clear, side in ((None, "south"), (lambda x, y, r: y - r > 1.75, "north")):
+        cy = Person("cy", (w_pt, x_pt, y_pt), speed=1.0, radius=0.2)
+        cid = p.connect(p.DIRECT)
+        try:
+            sp = SimPeople([cy], cid)
+            start_gap = float(sp.gaps(*robot, 0.178)[0])
+            assert start_gap < YIELD_GAP
+            gaps, path = [], []
+            for _ in range(round((PATIENCE + 4.0) * 60)):
+                sp.step(1 / 60, robot, 0.178, clear)
+                gaps.append(float(sp.gaps(*robot, 0.178)[0]))
+                path.append(tuple(sp.positions()[0]))
+            assert min(gaps) >= start_gap - 1e-9  # never closer than where they stood
+            assert sp.walks[0].direction == -1 and not sp.walks[0].rounding
+            # past the robot, on their way from y_pt back round the loop
+            assert math.hypot(path[-1][0] - w_pt[0], path[-1][1] - w_pt[1]) > 1.0
+            ys = [q[1] for q in path if abs(q[0] - robot[0]) < 0.2]
+            assert ys and (max(ys) < robot[1] if side == "south" else min(ys) > robot[1])
+        finally:
+            p.disconnect(cid)
+    # the old rule alone: a person kept waiting both ways stands there
+    cy = Person("cy", (w_pt, x_pt, y_pt), speed=1.0, radius=0.2)
+    sp, cid = _people([cy], robot=(2.6, 2.0), seconds=PATIENCE * 0.9)
+    try:
+        assert sp.positions()[0] == pytest.approx(w_pt) and sp.walks[0].waiting > 0.0
+    finally:
+        p.disconnect(cid)
