@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Generator, Sequence
 
 import numpy as np
 
@@ -86,6 +86,11 @@ FINGER_AXIS = 1
 #: after each release and retract the fingers close to stow; closing on something means the
 #: released item came along (caught on the fingers), so it is taken back down and let go again.
 PLACE_RELEASES = 3
+
+#: The retracts :func:`_free_retract` falls back to, in order, when the profile's is not
+#: free: straight up (map z) by the profile retract's length; up as much and half of it
+#: away from the base (over the basket).
+RETRACT_WAYS = ("up", "up and out")
 
 
 def _item_pose_and_size(prof: FetchProfile, T_marker: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:
@@ -239,7 +244,8 @@ def place(ctx: SkillContext, algorithm: str | None = None, time_limit: float | N
     approach as little as possible from how it carried the item, :data:`PLACE_ROLLS`);
     check the item is still held; open; detach and remove the item from the planning
     scene; retract (profile fetch.place_retract, default (0, 0, 0.10) m in the place
-    frame); close, and check the fingers closed on nothing: when they close on the item
+    frame; where that straight line is not free, straight up or up and out instead:
+    :func:`_free_retract`); close, and check the fingers closed on nothing: when they close on the item
     (it came along, caught on the fingers), go back down, open and retract again, at
     most :data:`PLACE_RELEASES` releases in all, then POSTCONDITION with the item held;
     stow the arm."""
@@ -311,17 +317,16 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
     yield from release(ctx, arm.grasp_force)
     q = measured_joints(ctx)
 
-    def plan_back() -> PlanResult:
+    def plan_back() -> tuple[PlanResult, str]:
         if name in ws.scene.items:
             ws.scene.detach_item(name, q)
             ws.scene.remove_item(name)
-        return ws.planner.cartesian_path(q, poses.retract, config=cfg)
+        return _free_retract(ws, q, poses, cfg)
 
     ctx.world.pop(WORLD_HELD, None)
-    back = yield from off_tick(ctx, ws, plan_back)
+    back, way = yield from off_tick(ctx, ws, plan_back)
     ctx.emit("scene_update", op="detach_remove", item=name, node=ctx.node_path)
-    back = planned(ctx, back, "place retract")
-    yield from execute(ctx, back, "place retract")
+    yield from _retract(ctx, back, way)
     g = ctx.robot.gripper
     assert g is not None
     for release_no in range(1, PLACE_RELEASES + 1):
@@ -349,10 +354,55 @@ def _place(ctx: SkillContext, algorithm: str | None, time_limit: float | None, a
         yield from release(ctx, arm.grasp_force)
         ctx.world.pop(WORLD_HELD, None)
         q = measured_joints(ctx)
-        up = yield from off_tick(ctx, ws, lambda q=q, T=again.retract: ws.planner.cartesian_path(q, T, config=cfg))
-        yield from execute(ctx, planned(ctx, up, "place retract"), "place retract")
+        up, way = yield from off_tick(ctx, ws, lambda q=q, p=again: _free_retract(ws, q, p, cfg))
+        yield from _retract(ctx, up, way)
     yield from move_named(ctx, arm.stow, cfg=cfg)
     return {"item": name}
+
+
+def _free_retract(ws: ArmWorkspace, q: list[float], poses: PlacePoses, cfg: PlannerConfig) -> tuple[PlanResult, str]:
+    """(worker thread) A collision-free straight retract of the open gripper from the
+    release pose at ``q`` (arm base frame): the profile's (``poses.retract``) when it is
+    free, else (:data:`RETRACT_WAYS`) straight up by as much, else up by as much and half
+    that away from the base, else a plan to the pose straight up. A base that stopped
+    closer to the basket than its depot pose leaves the arm folded over the release
+    point, and the profile's retract, back towards the base, folds it into the camera
+    tower (the LoCoBot lab crowd row, trials 107 and 132: 6 cm short); up, the fingers
+    leave the released item all the same. Returns the plan and which way it is (the
+    first that was free, or the profile's failure)."""
+    T0 = ws.kin.fk(q)
+    back = poses.retract[:3, 3] - T0[:3, 3]
+    length = float(np.linalg.norm(back))
+    up = np.array([0.0, 0.0, length])
+    away = np.array([-back[0], -back[1], 0.0]) * 0.5
+    first = ws.planner.cartesian_path(q, poses.retract, config=cfg)
+    if first.success or first.reason == CANCELLED or length < 1e-6:
+        return first, "profile"
+    tried = [back]
+    for way, offset in zip(RETRACT_WAYS, (up, up + away)):
+        if any(float(np.linalg.norm(offset - o)) < 1e-3 for o in tried):
+            continue  # the profile's retract is already straight up (a release from above)
+        tried.append(offset)
+        T = T0.copy()
+        T[:3, 3] += offset
+        res = ws.planner.cartesian_path(q, T, config=cfg)
+        if res.success or res.reason == CANCELLED:
+            return res, way
+    T = T0.copy()
+    T[:3, 3] += up
+    res = ws.planner.plan_to_pose(q, T, ik_seeds=[q], config=cfg)
+    if res.success or res.reason == CANCELLED:
+        return res, "planned up"
+    return first, "profile"
+
+
+def _retract(ctx: SkillContext, res: PlanResult, way: str) -> Generator[None, None, None]:
+    """Execute a retract :func:`_free_retract` chose (event ``place_retract_changed``
+    when it is not the profile's), or fail PLANNING with the profile's reason."""
+    if way != "profile" and res.success:
+        log.info("place: the profile's retract is not free; retracting %s", way)
+        ctx.emit("place_retract_changed", way=way, node=ctx.node_path)
+    yield from execute(ctx, planned(ctx, res, "place retract"), "place retract")
 
 
 def _raised(T: np.ndarray, by: float) -> np.ndarray:

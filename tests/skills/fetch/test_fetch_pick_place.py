@@ -213,3 +213,45 @@ def test_place_fails_planning_when_every_release_height_is_blocked(arm_robot, fe
     assert run.status is SkillStatus.FAILURE and run.failure.kind is FailureKind.PLANNING
     assert run.failure.reason.startswith("place pose:"), run.failure.reason
     assert not events_of(fetch_ctx, "place_raised")
+
+
+@pytest.mark.parametrize("closer", [0.05, 0.11])
+def test_place_retracts_up_when_the_base_stopped_short_of_the_depot_pose(arm_robot, fetch_ctx, closer):
+    """The base stopped ``closer`` [m] nearer the basket than its depot pose (the LoCoBot
+    lab crowd row's trials 107 and 132: docked 6 cm short): from the release pose the
+    profile's retract, straight back towards the base, folds the upper arm into the camera
+    tower. Place retracts another way (straight up, or up and out over the basket), which
+    leaves the released item all the same, closes on nothing and stows."""
+    from mmexec.skills.fetch.arm import RETRACT_WAYS
+
+    _perceive(fetch_ctx, arm_robot)
+    assert run_skill(fetch_ctx, "pick", {"marker": 7}).status is SkillStatus.SUCCESS
+    arm_robot.base.pose = Pose2D(1.0, 4.0 + closer, math.pi / 2)
+    fetch_ctx.events.clear()
+    followed = []
+    follow = arm_robot.arm.follow
+    arm_robot.arm.follow = lambda trajectory: followed.append(trajectory) or follow(trajectory)
+    run = run_skill(fetch_ctx, "place")
+    assert run.status is SkillStatus.SUCCESS, run.failure
+    assert [e["what"] for e in events_of(fetch_ctx, "arm_plan")] == ["place pose", "place retract", "arm to tuck"]
+    ways = [e["way"] for e in events_of(fetch_ctx, "place_retract_changed")]
+    assert len(ways) == 1 and ways[0] in RETRACT_WAYS
+    ws = fetch_ctx.world[WORLD_ARM]
+    T_release, T_out = (np.asarray(ws.kin.fk(followed[i].positions[-1])) for i in (0, 1))
+    # the profile's straight retract from that release pose is in collision with the robot
+    nominal = T_release.copy()
+    nominal[:3, 3] += _towards_base(T_release, 0.1)
+    assert not ws.planner.cartesian_path(list(followed[0].positions[-1]), nominal).success
+    rise = T_out[:3, 3] - T_release[:3, 3]
+    assert rise[2] == pytest.approx(0.1, abs=0.01)  # up by the profile retract's length (fetch.place_retract)
+    assert np.hypot(*T_release[:2, 3]) <= np.hypot(*T_out[:2, 3]) + 0.005  # not back towards the arm base
+    assert arm_robot.gripper.closes == 2 and WORLD_HELD not in fetch_ctx.world
+    assert list(arm_robot.arm.state().positions) == pytest.approx(arm_robot.profile["named_poses"]["tuck"], abs=0.02)
+
+
+def _towards_base(T_tool: np.ndarray, length: float) -> np.ndarray:
+    """``length`` [m] horizontally from the tool at ``T_tool`` (arm base frame) towards
+    the arm base: the profile's place retract (fetch.place_retract, along the place
+    frame's z, which points at the base)."""
+    d = -np.asarray(T_tool[:2, 3], dtype=float)
+    return np.array([*(length * d / np.linalg.norm(d)), 0.0])
