@@ -311,19 +311,31 @@ class RollingCostmap:
         marks = np.maximum(_bilinear(self._marks_field, fr, fc) - 0.5 * self.resolution, 0.0)
         return np.where(inside, np.minimum(out, marks), out)
 
-    def merged_grid(self, centres: np.ndarray | None = None, radii: np.ndarray | None = None) -> OccupancyGrid:
+    def _inside(self, centres: np.ndarray, radii: np.ndarray) -> np.ndarray:
+        """Window mask (n, n): cells whose centre lies inside any disc ``centres`` (k, 2),
+        ``radii`` (k,) [m]."""
+        cells = self.cell_centres()
+        centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+        d2 = ((cells[None, ..., 0] - centres[:, 0, None, None]) ** 2
+              + (cells[None, ..., 1] - centres[:, 1, None, None]) ** 2)
+        return (d2 <= (np.asarray(radii, dtype=float)[:, None, None]) ** 2).any(axis=0)
+
+    def merged_grid(self, centres: np.ndarray | None = None, radii: np.ndarray | None = None, *,
+                    ignore: tuple[np.ndarray, np.ndarray] | None = None) -> OccupancyGrid:
         """The static map with the current marks written in as occupied (100) cells, and
         the discs ``centres`` (k, 2) / ``radii`` (k,) [m] too when given (cells whose
         centre lies inside), for a global re-plan: inflate it by the robot radius, then
-        :func:`mmexec.skills.navigation.astar.plan_path`."""
+        :func:`mmexec.skills.navigation.astar.plan_path`. ``ignore`` (centres (m, 2),
+        radii (m,) [m]): discs whose marks are left out (the lidar's hits on people, who
+        move on); pinned marks are always written in."""
         data = np.array(self.grid.data, copy=True)
-        i, j = np.nonzero(self.marks)
+        marks = self.marks
+        if ignore is not None and len(ignore[1]):
+            marks = marks & (~self._inside(*ignore) | self.pinned)
+        i, j = np.nonzero(marks)
         r, c = i + self.r0, j + self.c0
         if centres is not None and radii is not None and len(radii):
-            cells = self.cell_centres()
-            d2 = ((cells[None, ..., 0] - centres[:, 0, None, None]) ** 2
-                  + (cells[None, ..., 1] - centres[:, 1, None, None]) ** 2)
-            di, dj = np.nonzero((d2 <= (np.asarray(radii)[:, None, None]) ** 2).any(axis=0))
+            di, dj = np.nonzero(self._inside(centres, radii))
             r, c = np.concatenate([r, di + self.r0]), np.concatenate([c, dj + self.c0])
         ok = (r >= 0) & (r < self.grid.height) & (c >= 0) & (c < self.grid.width)
         data[r[ok], c[ok]] = 100

@@ -56,6 +56,10 @@ __all__ = ["LocalCommand", "LocalPlanner", "LocalPlannerConfig", "barrier_fields
 ESCAPE_LOOK = 0.3
 #: [m/s] a base commanded at most this fast is waiting (:meth:`LocalPlanner.giving_way`)
 WAIT_SPEED = 0.05
+#: [m] a re-plan leaves out the costmap's marks this far round a person's covering circle
+#: too (:meth:`LocalPlanner.replan_grid`): the lidar's hits on them and the trail behind
+#: someone who walked up to the base, which their own body hides from the lidar
+PERSON_TRAIL = 0.25
 
 
 def barrier_fields(f: CbfResult | None, circles: Circles, pose: Pose2D, v_meas: float) -> dict[str, Any]:
@@ -209,13 +213,20 @@ class LocalPlanner:
         filter's look-ahead, so that the inflated map keeps the planned path out of the
         zone the filter guards; plus ``widen`` [m], to leave out a gap the base could not
         pass). People are left out (they move on), except, once the wait for them is
-        spent (:meth:`giving_way`), those standing still: the re-plan goes round them."""
+        spent (:meth:`giving_way`), those standing still: the re-plan goes round them.
+        The costmap's marks on the people left out, and on the trail they leave within
+        :data:`PERSON_TRAIL` of their circle (cells the lidar has not seen free since,
+        behind someone who walked up to the base), are left out with them: with them
+        in, two people standing by the base closed every way and the drive failed "no
+        path" while only people were in the way."""
         c = self.circles_at(now)
         keep = ~c.person
         if self.people_wait.spent:
             keep |= np.hypot(c.velocities[:, 0], c.velocities[:, 1]) <= self.config.tracking.moving_speed
+        gone = c.select(~keep)
         c = c.select(keep)
-        return self.costmap.merged_grid(c.centres, c.radii + self.config.cbf.lookahead + widen)
+        return self.costmap.merged_grid(c.centres, c.radii + self.config.cbf.lookahead + widen,
+                                        ignore=(gone.centres, gone.radii + PERSON_TRAIL))
 
     def giving_way(self, circles: Circles, pose: Pose2D, now: float) -> bool:
         """Whether the base, not making progress at ``pose`` at clock time ``now`` [s], is
