@@ -19,10 +19,19 @@ by more; the head is back at its home pose when the search ends, however it ends
 holds a tracked person within :data:`OCCLUSION_RANGE` is not taken as a look at what is
 behind them. When the marker is not seen there, the search waits for the cone to clear
 (at most :data:`OCCLUSION_WAIT` clock seconds, the base standing, the lidar still
-tracking) and looks again (``search_occluded``). When every location has been searched
-without finding the marker and some view was still blocked by people after the wait,
-the search goes over its locations once more (``search_second_pass``) before it fails: people walk in
-front of shelves and go.
+tracking) and looks again. When someone still stands in the view after the wait, within
+:data:`SIDESTEP_RANGE` of the camera, the base steps :data:`SIDESTEP` aside, square to
+its heading and away from them (the other side when that one has no path; at most
+:data:`MAX_SIDESTEPS` per location), looks from there, and once more after a wait if
+they are still in the way; the turn goes on from where it stands. A person whose way
+runs through the spot the robot looks from walks up to it, waits in front of the camera
+and comes back on their way as long as the robot stands there: waiting does not uncover
+the shelf behind them, stepping aside does (the LoCoBot lab crowd row's trials 39 and
+94). One ``search_occluded`` event per such view (how many people, how long it waited,
+whether it cleared, the sidestep). When every location has been searched without
+finding the marker and some view was still blocked by people after all that, the search
+goes over its locations once more (``search_second_pass``) before it fails: people walk
+in front of shelves and go.
 """
 
 from __future__ import annotations
@@ -71,6 +80,17 @@ WORLD_SEARCH = "search.progress"
 OCCLUSION_RANGE = 3.0
 #: [s] how long a view waits for the people in its cone to move on before it counts
 OCCLUSION_WAIT = 6.0
+#: [m] a person still in the view after the wait and this close to the camera is looked
+#: past by stepping aside: at 0.5-1 m a person hides a shelf's whole width, and from a
+#: step aside the shelf behind them moves out from behind them (parallax)
+SIDESTEP_RANGE = 1.5
+#: [m] how far the base steps aside, square to its heading (enough for a person of 0.25 m
+#: radius 0.6 m ahead to uncover what stands 1.7 m ahead)
+SIDESTEP = 0.4
+#: sidesteps at most per location visited (each costs a short drive and one more wait)
+MAX_SIDESTEPS = 2
+#: [s] clock time a sidestep's drive may take
+SIDESTEP_TIMEOUT = 20.0
 
 
 @dataclass(frozen=True)
@@ -241,11 +261,17 @@ class _PeopleWatch:
     def in_view(self) -> int:
         """How many tracked people stand in the camera's horizontal view cone within
         :data:`OCCLUSION_RANGE` of it now."""
+        return len(self.people_in_view())
+
+    def people_in_view(self) -> list[tuple[float, float]]:
+        """The tracked people in the camera's horizontal view cone within
+        :data:`OCCLUSION_RANGE` of it now: (distance from the camera [m], bearing from
+        the optical axis [rad], positive to its left) each, nearest first."""
         cam, base = self.ctx.robot.camera, self.ctx.robot.base
         assert cam is not None and base is not None
         people = self.planner.circles_at(self.ctx.clock.now()).people
         if not len(people):
-            return 0
+            return []
         T = base.state().pose.matrix() @ cam.pose_in_base()
         cx, cy = T[0, 3], T[1, 3]
         yaw = math.atan2(T[1, 2], T[0, 2])  # the optical axis (z) in map
@@ -253,9 +279,10 @@ class _PeopleWatch:
         half = math.atan2(0.5 * k.width, k.fx)
         d = np.hypot(people.centres[:, 0] - cx, people.centres[:, 1] - cy)
         bearing = np.arctan2(people.centres[:, 1] - cy, people.centres[:, 0] - cx) - yaw
-        off = np.abs(np.arctan2(np.sin(bearing), np.cos(bearing)))
+        signed = np.arctan2(np.sin(bearing), np.cos(bearing))
         widen = np.arcsin(np.clip(people.radii / np.maximum(d, 1e-6), 0.0, 1.0))
-        return int(np.count_nonzero((d < OCCLUSION_RANGE) & (off < half + widen)))
+        inside = (d < OCCLUSION_RANGE) & (np.abs(signed) < half + widen)
+        return sorted((float(a), float(b)) for a, b in zip(d[inside], signed[inside]))
 
 
 def _observed(gen: Generator[None, None, Any], watch: _PeopleWatch | None) -> Generator[None, None, Any]:
@@ -282,25 +309,83 @@ def _observed(gen: Generator[None, None, Any], watch: _PeopleWatch | None) -> Ge
         return stop.value
 
 
-def _wait_for_view(ctx: SkillContext, watch: _PeopleWatch, progress: SearchProgress) -> Generator[None, None, bool]:
+def _wait_for_view(ctx: SkillContext, watch: _PeopleWatch) -> Generator[None, None, bool]:
     """People stand in the view: wait (base stopped, scans tracked) until the cone is
     clear or :data:`OCCLUSION_WAIT` has passed. True when it cleared."""
     base = ctx.robot.base
     assert base is not None
-    progress.occluded += 1
     t0 = ctx.clock.now()
-    people = watch.in_view()
     while ctx.clock.now() - t0 < OCCLUSION_WAIT:
         base.stop()
         yield
         watch.observe()
         if not watch.in_view():
             break
-    cleared = not watch.in_view()
+    return not watch.in_view()
+
+
+def _sidestep(ctx: SkillContext, watch: _PeopleWatch, left: float, deadline: float) -> Generator[None, None, str | None]:
+    """Step the base :data:`SIDESTEP` aside, square to its heading, keeping the heading:
+    to the side away from a person ``left`` of the optical axis (bearing [rad], positive
+    to its left), else the other side when that one has no path. The side taken
+    ("left", "right"), or None when neither could be driven (the search goes on from
+    where the base stands)."""
+    base = ctx.robot.base
+    assert base is not None
+    p = base.state().pose
+    first = -1.0 if left > 0.0 else 1.0  # +1: to the base's left
+    for sign in (first, -first):
+        goal = Pose2D(p.x - sign * SIDESTEP * math.sin(p.theta), p.y + sign * SIDESTEP * math.cos(p.theta), p.theta)
+        try:
+            yield from _observed(drive_path(ctx, goal, "search sidestep",
+                                            timeout=max(1.0, min(SIDESTEP_TIMEOUT, deadline - ctx.clock.now())),
+                                            viewpoint=True), watch)
+        except SkillFailure as e:
+            if e.kind not in (FailureKind.PLANNING, FailureKind.EXECUTION):
+                raise
+            log.info("search: no sidestep to the %s (%s)", "left" if sign > 0 else "right", e.reason)
+            if e.kind is FailureKind.EXECUTION:
+                return None  # stopped on the way (a timeout, people): look from where it stands
+            continue
+        return "left" if sign > 0 else "right"
+    return None
+
+
+def _look_past_people(ctx: SkillContext, watch: _PeopleWatch, progress: SearchProgress, n_frames: int,
+                      settle_s: float, deadline: float, steps: list[int]) -> Generator[None, None, Any]:
+    """The view just looked at did not show the marker and people stand in it: wait for
+    them, look again when they go; when they stay close, step aside (``steps[0]`` left
+    at this location) and look from there, and again after another wait if they are
+    still in the way. The estimate, or None. Counts the view as occluded, and as hidden
+    when the last look still had people in the way; emits ``search_occluded``."""
+    progress.occluded += 1
+    t0 = ctx.clock.now()
+    people = len(watch.people_in_view())
+    est = None
+    cleared = yield from _wait_for_view(ctx, watch)
+    side = None
+    still = [] if cleared else watch.people_in_view()
+    if steps[0] > 0 and still and still[0][0] <= SIDESTEP_RANGE:
+        steps[0] -= 1
+        side = yield from _sidestep(ctx, watch, still[0][1], deadline)
+        yield from _observed(_settle(ctx, settle_s), watch)
+        est = yield from look(ctx, progress.marker, n_frames)
+        watch.observe()
+        cleared = not watch.in_view()
+        looked = True
+        if est is None and not cleared:
+            cleared = yield from _wait_for_view(ctx, watch)
+            looked = not cleared  # cleared during this wait: look again below
+    else:
+        looked = not cleared
     progress.hidden += not cleared
+    fields: dict[str, Any] = {"sidestep": side} if side is not None else {}
     ctx.emit("search_occluded", marker=progress.marker, view=progress.views, people=people,
-             waited=round(ctx.clock.now() - t0, 2), cleared=cleared, node=ctx.node_path)
-    return cleared
+             waited=round(ctx.clock.now() - t0, 2), cleared=cleared, **fields, node=ctx.node_path)
+    if not looked:  # the view cleared since the last look: look again
+        yield from _observed(_settle(ctx, settle_s), watch)
+        est = yield from look(ctx, progress.marker, n_frames)
+    return est
 
 
 def _search_stops(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str] | None], skipped: list[str],
@@ -338,6 +423,7 @@ def _search_pass(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str] 
     base = ctx.robot.base
     assert base is not None
     for stop in stops:
+        steps = [MAX_SIDESTEPS]
         if stop is not None:
             pose, label = stop
             try:
@@ -365,9 +451,8 @@ def _search_pass(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str] 
                 est = yield from look(ctx, marker, n_frames)
                 if est is None and watch is not None:
                     watch.observe()
-                    if watch.in_view() and (yield from _wait_for_view(ctx, watch, progress)):
-                        yield from _observed(_settle(ctx, settle_s), watch)
-                        est = yield from look(ctx, marker, n_frames)
+                    if watch.in_view():
+                        est = yield from _look_past_people(ctx, watch, progress, n_frames, settle_s, deadline, steps)
                 if est is not None:
                     p = base.state().pose
                     progress.found_at = (p.x, p.y, p.theta)

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 from test_nav_local_drive import ScanLidar, room
 
-import mmexec.skills.search  # noqa: F401 - registers search
+import mmexec.skills.search  # registers search
 from mmexec.drivers.interfaces import Pose2D
 from mmexec.drivers.mock.robot import MockRobot
 from mmexec.skills.base import SkillContext, SkillStatus, run_skill
@@ -68,11 +68,13 @@ def test_nobody_in_the_way_one_pass():
     assert not _of(events, "search_occluded") and not _of(events, "search_second_pass")
 
 
-def test_a_person_pacing_in_front_of_the_camera_is_waited_for_then_searched_past_again():
-    """Someone paces 0.8 m in front of the camera at the search location (in its cone all the time):
+def test_a_person_pacing_in_front_of_the_camera_is_waited_for_then_searched_past_again(monkeypatch):
+    """Someone paces 0.8 m in front of the camera at the search location (in its cone all the time),
+    and the search may not step aside (MAX_SIDESTEPS 0):
     the views facing them wait OCCLUSION_WAIT and count as hidden; the marker is not
     found (the mock camera sees none), so the search goes over its location once more
     and fails saying people were in the way."""
+    monkeypatch.setattr(mmexec.skills.search, "MAX_SIDESTEPS", 0)
     events: list[tuple[str, dict[str, Any]]] = []
     run = _search(5.3, events)
     assert run.status is SkillStatus.FAILURE
@@ -92,4 +94,25 @@ def test_a_person_who_walks_off_is_waited_for_and_the_view_looked_at_again():
     (occluded,) = _of(events, "search_occluded")
     assert occluded["cleared"] and occluded["waited"] < OCCLUSION_WAIT
     assert occluded["t"] == pytest.approx(STOP, abs=0.6)            # cleared within a few scans of leaving
+    assert not _of(events, "search_second_pass") and run.failure.reason.endswith("people in the way of 1 views")
+
+
+def test_a_person_who_stays_in_front_of_the_camera_is_looked_past_from_a_step_aside():
+    """The same person pacing 0.8 m ahead, and the search may step aside: after the wait
+    the base steps SIDESTEP square to its heading, away from the side the person stood
+    on, keeps its heading, and looks from there, where the person no longer fills the
+    view; with nobody left in the way there is no second pass."""
+    from mmexec.skills.search import SIDESTEP
+
+    events: list[tuple[str, dict[str, Any]]] = []
+    run = _search(5.3, events)
+    assert run.status is SkillStatus.FAILURE
+    (occluded,) = _of(events, "search_occluded")
+    assert occluded["sidestep"] in ("left", "right") and occluded["cleared"]
+    assert occluded["waited"] >= OCCLUSION_WAIT
+    goals = [f for f in _of(events, "base_status") if f.get("label") == "search sidestep"]
+    assert len(goals) == 1
+    x, y, theta = goals[0]["goal"]
+    assert x == pytest.approx(4.5, abs=0.03) and abs(y - 1.5) == pytest.approx(SIDESTEP, abs=0.03)
+    assert theta == pytest.approx(0.0, abs=0.05)
     assert not _of(events, "search_second_pass") and run.failure.reason.endswith("people in the way of 1 views")
