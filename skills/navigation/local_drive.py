@@ -99,6 +99,7 @@ from mmexec.skills.navigation.cbf import QpStatus
 from mmexec.skills.navigation.dwa import DwaStatus
 from mmexec.skills.navigation.grid import CostMap, inflate
 from mmexec.skills.navigation.local_planner import (
+    WAIT_SPEED,
     LocalCommand,
     LocalPlanner,
     LocalPlannerConfig,
@@ -156,6 +157,15 @@ ITEM_DOCK_NEAR = 0.08
 ITEM_DOCK_PAUSE = 2.0
 #: [m] how far back a turn the item cannot make either way backs off before trying again
 ITEM_BACK_OFF = 0.15
+#: [s] how long a turn in place that something walked into the held item's sweep of
+#: holds (base stopped, the sweep ahead checked each tick) before it looks for another
+#: way round (:meth:`LocalDrive._turn`)
+ITEM_TURN_HOLD = 3.0
+#: docking's progress: the distance to the goal [m], then the heading error [rad], must
+#: fall by this much below its best within the DWA's ``stuck_time`` (a base that crept a
+#: centimetre closer every few seconds, held back by someone standing by the stop,
+#: restarted the count for 90 s)
+DOCK_PROGRESS = (0.03, 0.05)
 #: [m] with an item held, the path's last stretch runs straight into the goal for the
 #: item's reach past the footprint plus this (or a quarter of it where that has no room;
 #: :meth:`LocalDrive._approach_point`) ...
@@ -546,6 +556,10 @@ class LocalDrive:
         ctx, base = self.ctx, self.base
         now = ctx.clock.now()
         self.planner.reset_command()
+        # what is round the base now (the costmap was last fed in the previous drive: after
+        # a pick someone stood behind the base, and the turn to the path, checked against the
+        # old marks, swung the item into them)
+        self._observe()
         self._guard = self._item_guard()
         if self._given_path is not None:
             start, given = base.state().pose, self._given_path
@@ -829,9 +843,13 @@ class LocalDrive:
             phase = tracker.phase
             progress = (abs(wrap_angle(self.goal.theta - st.pose.theta)) if phase == "align"
                         else math.hypot(self.goal.x - st.pose.x, self.goal.y - st.pose.y))
-            if progress < best - 0.01:
+            if progress < best - DOCK_PROGRESS[phase == "align"]:
                 best, t_best = progress, now
-            elif self._giving_way(circles, st.pose):
+            elif self.planner.people_wait.update(circles.people, (st.pose.x, st.pose.y), now,
+                                                 abs(u[0]) <= WAIT_SPEED):
+                # giving way to people, within the patience; standing is judged by docking's
+                # own last command (the planner's is the DWA's from before docking began,
+                # and a fast one there never let the patience run out)
                 t_best += dt
             elif now - t_best > self.config.planner.dwa.stuck_time:
                 yield from brake(ctx, base)
@@ -852,11 +870,18 @@ class LocalDrive:
         held, the turn goes the way round that keeps it clear (:meth:`_item_way`). False
         when a contact cut the turn short (the contact recovery ran), or when neither way
         keeps the item clear (no turn; ``_item_blocked`` set)."""
-        angle = yield from self._item_way(target)
-        self._item_blocked = angle is None
-        if angle is None:
-            return False
-        return (yield from self._turn_by(angle, rate))
+        for _ in range(2):
+            angle = yield from self._item_way(target)
+            self._item_blocked = angle is None
+            if angle is None:
+                return False
+            if (yield from self._turn_by(angle, rate)):
+                return True
+            if not self._item_blocked:
+                return False  # a contact: its recovery ran
+            # something walked into the item's sweep and stayed: the other way round, or
+            # back off (:meth:`_item_way`), from where the turn stopped
+        return False
 
     def _turn_by(self, angle: float, rate: float | None) -> Generator[None, None, bool]:
         """Turn in place by ``angle`` [rad] (signed, counted as the base turns, so more
@@ -883,10 +908,10 @@ class LocalDrive:
         for attempt in range(2):
             pose = self.base.state().pose
             angle = wrap_angle(target - pose.theta)
-            if guard.turn_clear(pose, angle):
+            if self._sweep_clear(pose, angle):
                 return angle
             other = angle - math.copysign(2.0 * math.pi, angle)
-            if guard.turn_clear(pose, other):
+            if self._sweep_clear(pose, other):
                 self._emit_item("turn the other way round", pose)
                 return other
             room = self._room_behind(pose, ITEM_BACK_OFF) if attempt == 0 else 0.0
@@ -913,11 +938,19 @@ class LocalDrive:
     def _turn(self, error: Callable[[float], float], rate: float | None) -> Generator[None, None, bool]:
         """Turn in place until ``error(theta)`` [rad] is within the heading tolerance: the
         fastest turn rate that still stops there, within the limits (and ``rate``). False
-        when a contact cut it short (the contact recovery ran)."""
+        when a contact cut it short (the contact recovery ran), or, with an item held, when
+        something came into the item's sweep ahead and stayed (``_item_blocked`` set).
+        With an item held the sweep of the rest of the turn is checked on every tick
+        against the newest scan (:meth:`_sweep_clear`); when it is not clear the base
+        stops and holds, up to :data:`ITEM_TURN_HOLD` seconds, and turns on once it is
+        (a person walked into the sweep of the turn after a pick, and the item touched
+        them, when the turn was checked only as it began)."""
         ctx, base = self.ctx, self.base
         lim = self.config.planner.limits
         w_max = lim.max_w if rate is None else min(lim.max_w, rate)
         last = ctx.clock.now()
+        held: float | None = None  # [s] when the turn stopped for the item's sweep
+        self._item_blocked = False
         while True:
             faults = self._check_faults()
             if faults:
@@ -933,12 +966,49 @@ class LocalDrive:
                 raise self._fail(FailureKind.EXECUTION, f"not at {self.label} after {self.timeout:g} s", "timeout")
             dt = max(now - last, 1e-3)
             last = now
+            self._observe()
+            if not self._sweep_clear(st.pose, err):
+                if held is None:
+                    held = now
+                    self._emit_item("turn held: something came into the held item's sweep", st.pose)
+                if now - held > ITEM_TURN_HOLD:
+                    yield from brake(ctx, base)
+                    self._item_blocked = True
+                    return False
+                dw = lim.accel_w * dt
+                base.set_velocity(0.0, max(st.w - dw, min(st.w + dw, 0.0)))
+                yield
+                continue
+            held = None
             w_stop = math.sqrt(2.0 * lim.accel_w * 0.8 * abs(err))
             w_des = math.copysign(max(min(w_max, w_stop), 0.1), err)
             dw = lim.accel_w * dt
             base.set_velocity(0.0, max(st.w - dw, min(st.w + dw, w_des)))
-            self._observe()
             yield
+
+    def _sweep_clear(self, pose: Pose2D, angle: float) -> bool:
+        """Whether a turn in place by ``angle`` [rad] (signed, may exceed pi) from
+        ``pose`` keeps the held item clear of the costmap (:meth:`ItemGuard.turn_clear`)
+        and of the tracked people (their covering circles, each moved at its velocity to
+        when the base passes each heading at full turn rate), as :class:`ItemGuard` judges
+        it: no closer than ``margin``, or than at the start; True without an item."""
+        guard = self._guard
+        if guard is None:
+            return True
+        if not guard.turn_clear(pose, angle):
+            return False
+        people = self.planner.circles_at(self.ctx.clock.now()).people
+        if not len(people):
+            return True
+        n = max(1, math.ceil(abs(angle) / guard.TURN_STEP))
+        f = np.linspace(0.0, 1.0, n + 1)
+        pts = guard.item.in_map(np.stack([np.full(n + 1, pose.x), np.full(n + 1, pose.y), pose.theta + f * angle],
+                                         axis=1))  # (n + 1, k, 2)
+        t = f * abs(angle) / max(self.config.planner.limits.max_w, 1e-6)
+        centres = people.centres[None] + t[:, None, None] * people.velocities[None]  # (n + 1, m, 2)
+        d = np.linalg.norm(pts[:, :, None, :] - centres[:, None, :, :], axis=-1) - people.radii - guard.item.radius
+        gap = d.min(axis=(1, 2))  # per heading along the turn
+        return not bool(np.any((gap[1:] < guard.margin) & (gap[1:] < gap[0] - 1e-3)))
 
     def _room_behind(self, pose: Pose2D, distance: float) -> float:
         """How far [m] (up to ``distance``) the base can back straight off from ``pose``
@@ -1018,7 +1088,7 @@ class LocalDrive:
         here = self.base.state().pose
         room_round = float(self.planner.costmap.clearance_at(np.array([[here.x, here.y]]))[0]) - \
             self.config.planner.limits.radius
-        if room_round >= RECOVERY_TURN_ROOM and (self._guard is None or self._guard.turn_clear(here, 2.0 * math.pi)):
+        if room_round >= RECOVERY_TURN_ROOM and self._sweep_clear(here, 2.0 * math.pi):
             yield from self._turn_by(2.0 * math.pi, None)
         else:
             log.info("%s: recovery without the turn: %.2f m round the footprint", self.label, room_round)
