@@ -22,13 +22,13 @@ closer than :data:`YIELD_GAP` to the robot's footprint circle (and closer than t
 so they never walk into the robot; a contact with a person is the robot's doing. A
 person kept waiting for :data:`PATIENCE` seconds turns round and walks their loop the
 other way (someone the robot waits for, and who waits for the robot, would otherwise
-stand there for ever). A person who turned round and is blocked again before taking a
-step (cornered: the robot stands where both ways of their loop pass it, by a waypoint)
-walks round the robot instead: each substep a step along the tangent of the circle round
-the robot's centre (the side nearer where they were going; never closer to the robot,
-and only where the static geometry leaves their radius + :data:`ROUND_CLEAR`, when the
-caller gives the clearance), then straight on towards the end of the leg they are on,
-where the loop resumes. Before, such a person stood by the robot for minutes: in the
+stand there for ever). A person who turned round and is blocked again before getting
+:data:`CORNER_GAP` further from the robot (cornered: the robot stands where both ways
+of their loop pass it, by a waypoint) walks round the robot instead: each substep a
+step along the tangent of the circle round the robot's centre (the side nearer where
+they were going; never closer to the robot, and only where the static geometry leaves
+their radius + :data:`ROUND_CLEAR`, when the caller gives the clearance), then straight
+on towards the end of the leg they are on, where the loop resumes. Before, such a person stood by the robot for minutes: in the
 LoCoBot crowd campaigns a person stood by home or a viewpoint for the rest of the trial
 and the robot, which could not reach its goal past them, timed out (3 of 200 trials).
 People do not avoid each other (they may overlap; neither the lidar nor the robot minds).
@@ -48,7 +48,7 @@ import pybullet as p
 from mmexec.sim.scene import GROUP_ITEM, GROUP_QUERY, GROUP_STATIC
 from mmexec.sim.world import Person
 
-__all__ = ["PATIENCE", "ROUND_CLEAR", "YIELD_GAP", "SimPeople", "Walk"]
+__all__ = ["CORNER_GAP", "PATIENCE", "ROUND_CLEAR", "YIELD_GAP", "SimPeople", "Walk"]
 
 #: [m] the smallest gap a person leaves between themselves and the robot's footprint circle
 #: (more than the robot's own safety margin, so a person who waits is never inside it)
@@ -57,6 +57,10 @@ YIELD_GAP = 0.3
 PATIENCE = 3.0
 #: [m] room a person walking round the robot keeps from the static geometry beyond their radius
 ROUND_CLEAR = 0.05
+#: [m] a person who turned round for the robot and is blocked again before their gap to
+#: it grew beyond YIELD_GAP + this is cornered, and walks round it (a person stepping a
+#: few cm each way between two legs that both pass the robot stood by it for minutes)
+CORNER_GAP = 0.5
 #: RGBA of a person's body (a dark blue coat: a distinct colour in camera frames)
 _COLOUR = (0.15, 0.2, 0.45, 1.0)
 
@@ -68,7 +72,7 @@ class Walk:
     waypoint ``leg``, the seconds left of the delay or pause (``timer``), the position
     ``xy`` [m] in ``map``, the ``direction`` along the loop (+1 as given, -1 reversed),
     how long they have been ``waiting`` for the robot [s], whether they ``turned`` round
-    for it and have not stepped since, and whether they are ``rounding`` it (off their
+    for it and have not got :data:`CORNER_GAP` further from it since, and whether they are ``rounding`` it (off their
     leg, walking round the robot and then straight to the leg's end)."""
 
     phase: str
@@ -200,7 +204,7 @@ class SimPeople:
                 if w.waiting >= PATIENCE:
                     w.direction, w.waiting, w.turned = -w.direction, 0.0, True
                 return
-        if xy != w.xy:
+        if gap_new >= YIELD_GAP + CORNER_GAP:
             w.turned = False
         if arrived:
             w.rounding, w.side = False, 0.0

@@ -287,28 +287,29 @@ def test_an_unknown_field_in_the_truth_log_name_is_a_located_error(sim_section):
         build(sim_section("truth_log: x_{run}.jsonl\n"), profile={}, seed=1, options={})
 
 
-def test_a_cornered_person_walks_round_the_robot():
+@pytest.mark.parametrize("robot_x", [2.6, 2.75])
+def test_a_cornered_person_walks_round_the_robot(robot_x):
     """A robot standing by a waypoint where both legs of the loop pass it: the person
-    waits, turns round, is blocked again at once, and walks round the robot (never
-    closer to it, on the side the static geometry leaves free) on to the next waypoint,
+    waits, turns round, is blocked again at once (robot at 2.6) or after a few steps
+    back and forth (2.75), and walks round the robot (never closer to it than where
+    they stood, on the side the static geometry leaves free) on to the next waypoint,
     instead of standing there for ever (the crowd campaigns' 90 s timeouts)."""
     import pybullet as p
 
-    robot = (2.6, 2.0)
+    robot = (robot_x, 2.0)
     w_pt, x_pt, y_pt = (2.0, 2.0), (4.0, 2.5), (4.0, 1.5)
     for clear, side in ((None, "south"), (lambda x, y, r: y - r > 1.75, "north")):
         cy = Person("cy", (w_pt, x_pt, y_pt), speed=1.0, radius=0.2)
         cid = p.connect(p.DIRECT)
         try:
             sp = SimPeople([cy], cid)
-            start_gap = float(sp.gaps(*robot, 0.178)[0])
-            assert start_gap < YIELD_GAP
+            start_gap = min(float(sp.gaps(*robot, 0.178)[0]), YIELD_GAP)
             gaps, path = [], []
-            for _ in range(round((PATIENCE + 4.0) * 60)):
+            for _ in range(round((2 * PATIENCE + 4.0) * 60)):
                 sp.step(1 / 60, robot, 0.178, clear)
                 gaps.append(float(sp.gaps(*robot, 0.178)[0]))
                 path.append(tuple(sp.positions()[0]))
-            assert min(gaps) >= start_gap - 1e-9  # never closer than where they stood
+            assert min(gaps) >= start_gap - 0.02  # never closer than where they stood (a step)
             assert sp.walks[0].direction == -1 and not sp.walks[0].rounding
             # past the robot, on their way from y_pt back round the loop
             assert math.hypot(path[-1][0] - w_pt[0], path[-1][1] - w_pt[1]) > 1.0
