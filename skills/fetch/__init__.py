@@ -1,6 +1,7 @@
 """The fetch-item mission's own skills (issue 5, seed paper: low-resource LoCoBot fetch
 architecture): ``pick`` (the box tagged with the requested marker) and ``place`` (in the
-depot basket), and the profile's ``fetch:`` section (the item, its grasp, the depot;
+depot basket), ``marker_grasp_frame`` and ``relocate_marker`` (the way to a marker whose
+front is blocked, :mod:`mmexec.skills.fetch.holistic`), and the profile's ``fetch:`` section (the item, its grasp, the depot;
 :class:`mmexec.skills.fetch.profile.FetchProfile`). See docs/fetch.md.
 
 The rest of the mission is the general skill library, which importing this package
@@ -14,10 +15,10 @@ interfaces, so they run unchanged on the simulator and the real robot.
 from __future__ import annotations
 
 from mmexec.skills import search
-from mmexec.skills.fetch import arm, profile
+from mmexec.skills.fetch import arm, holistic, profile
 from mmexec.skills.fetch.profile import FetchProfile
 from mmexec.skills.manipulation import arm as arm_motion
 from mmexec.skills.navigation import approach, navigate
 from mmexec.skills.perception import detect
 
-__all__ = ["FetchProfile", "approach", "arm", "arm_motion", "detect", "navigate", "profile", "search"]
+__all__ = ["FetchProfile", "approach", "arm", "arm_motion", "detect", "holistic", "navigate", "profile", "search"]

@@ -56,6 +56,7 @@ from mmexec.skills.manipulation.arm import (
     with_arm_status,
     workspace,
 )
+from mmexec.skills.manipulation.holistic_skill import holistic_seed
 from mmexec.skills.navigation.navigate import back_off
 from mmexec.skills.perception.detect import markers
 
@@ -152,6 +153,9 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     poses = grasp_poses(T_am_marker, ws.kin.approach_axis, pre_grasp=prof.pre_grasp, grasp_depth=prof.grasp_depth,
                         retract=prof.retract, grasp_height=prof.grasp_height)
     q, seeds, boxes = measured_joints(ctx), ik_seeds(ctx, ws, poses.pre_grasp), ctx.robot.scene
+    first = holistic_seed(ctx)  # after a holistic stand-off: its arm solution's family first
+    if first is not None:
+        seeds = [first, *seeds]
 
     def plan_pre_grasp() -> PlanResult:
         ws.scene.set_static_boxes(boxes, T_am)
