@@ -196,7 +196,7 @@ class SimPeople:
             gap_now = math.hypot(w.xy[0] - rx, w.xy[1] - ry) - pe.radius - robot_radius
             if gap_new < gap_now:  # the robot is in the way
                 if w.turned or w.rounding:
-                    q = self._round_step(pe, w, xy, robot_xy, pe.speed * dt, clear)
+                    q = self._round_step(pe, w, xy, robot_xy, pe.speed * dt, clear, gap_now < YIELD_GAP)
                     if q is not None:  # cornered: walk round it
                         w.xy, w.rounding, w.turned, w.waiting = q, True, False, 0.0
                         return
@@ -214,13 +214,15 @@ class SimPeople:
 
     @staticmethod
     def _round_step(pe: Person, w: Walk, towards: tuple[float, float], robot_xy: tuple[float, float], step: float,
-                    clear: Callable[[float, float, float], bool] | None) -> tuple[float, float] | None:
+                    clear: Callable[[float, float, float], bool] | None, near: bool) -> tuple[float, float] | None:
         """Where person ``pe`` at ``w.xy``, who wanted to step to ``towards`` [m], steps
         instead to walk round the robot centred at ``robot_xy``: ``step`` [m] along the
-        tangent of the circle round it (which never comes closer to the robot), on the
-        side ``w.side`` kept from the first such step (at first the side nearer
-        ``towards``), or the other where ``clear`` does not leave the person's radius +
-        :data:`ROUND_CLEAR` (the side then kept); None when neither does."""
+        tangent of the circle round it (which never comes closer to the robot; ``near``,
+        closer than :data:`YIELD_GAP` to its footprint, where the robot came up to them:
+        half outwards, so they pass round it no nearer than that, clear of an item it holds
+        out), on the side ``w.side`` kept from the first such step (at first the side
+        nearer ``towards``), or the other where ``clear`` does not leave the person's
+        radius + :data:`ROUND_CLEAR` (the side then kept); None when neither does."""
         here = w.xy
         ux, uy = robot_xy[0] - here[0], robot_xy[1] - here[1]
         n = math.hypot(ux, uy)
@@ -229,8 +231,11 @@ class SimPeople:
         tx, ty = uy / n, -ux / n  # anticlockwise round the robot
         if w.side == 0.0:
             w.side = 1.0 if tx * (towards[0] - here[0]) + ty * (towards[1] - here[1]) >= 0.0 else -1.0
+        out = 1.0 if near else 0.0
         for s in (w.side, -w.side):
-            q = (here[0] + s * step * tx, here[1] + s * step * ty)
+            dx, dy = s * tx - out * ux / n, s * ty - out * uy / n
+            k = step / math.hypot(dx, dy)
+            q = (here[0] + k * dx, here[1] + k * dy)
             if clear is None or clear(q[0], q[1], pe.radius + ROUND_CLEAR):
                 w.side = s
                 return q

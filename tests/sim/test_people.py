@@ -290,9 +290,10 @@ def test_an_unknown_field_in_the_truth_log_name_is_a_located_error(sim_section):
 @pytest.mark.parametrize("robot_x", [2.6, 2.75])
 def test_a_cornered_person_walks_round_the_robot(robot_x):
     """A robot standing by a waypoint where both legs of the loop pass it: the person
-    waits, turns round, is blocked again at once (robot at 2.6) or after a few steps
-    back and forth (2.75), and walks round the robot (never closer to it than where
-    they stood, on the side the static geometry leaves free) on to the next waypoint,
+    waits, turns round, is blocked again at once (robot at 2.6, 0.22 m from them) or
+    after a few steps back and forth (2.75), and walks round the robot (never closer to
+    it than where they stood, out to YIELD_GAP from it, on the side the static geometry
+    leaves free) on to the next waypoint,
     instead of standing there for ever (the crowd campaigns' 90 s timeouts)."""
     import pybullet as p
 
@@ -315,6 +316,10 @@ def test_a_cornered_person_walks_round_the_robot(robot_x):
             assert math.hypot(path[-1][0] - w_pt[0], path[-1][1] - w_pt[1]) > 1.0
             ys = [q[1] for q in path if abs(q[0] - robot[0]) < 0.2]
             assert ys and (max(ys) < robot[1] if side == "south" else min(ys) > robot[1])
+            # passing beside it no nearer than YIELD_GAP (stepping out from where the robot
+            # came up to them: an item held out reaches 0.29 m past the LoCoBot's footprint)
+            beside = [g for g, q in zip(gaps, path) if abs(q[0] - robot[0]) < 0.2]
+            assert min(beside) >= YIELD_GAP - 0.02
         finally:
             p.disconnect(cid)
     # the old rule alone: a person kept waiting both ways stands there
