@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Generator, Sequence
+from collections.abc import Generator, Iterator, Sequence
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from mmexec.skills.base import (
 from mmexec.skills.fetch.profile import FetchProfile, fetch_profile
 from mmexec.skills.manipulation import (
     CANCELLED,
+    GraspPoses,
     PlacePoses,
     PlannerConfig,
     PlanResult,
@@ -162,7 +163,7 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
         for old in list(ws.scene.items):
             ws.scene.remove_item(old)
         ws.scene.add_item(name, size, T_item)
-        return ws.planner.plan_to_pose(q, poses.pre_grasp, ik_seeds=seeds, config=cfg)
+        return _plan_pre_grasp(ws, q, poses, seeds, cfg, name, size, T_item)
 
     g = ctx.robot.gripper
     assert g is not None
@@ -223,6 +224,83 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     if not held:
         raise SkillFailure(FailureKind.POSTCONDITION, f"item of marker {marker} lost after lifting it ({why})")
     return {"item": name}
+
+
+def _plan_pre_grasp(ws: ArmWorkspace, q: list[float], poses: GraspPoses, seeds: list[list[float]],
+                    cfg: PlannerConfig, name: str, size: tuple[float, float, float],
+                    T_item: np.ndarray) -> PlanResult:
+    """(worker thread) A plan to the pre-grasp (arm base frame) whose IK solution the
+    straight grasp approach can start from: the collision-free IK solutions of the
+    pre-grasp in turn (:func:`_pre_grasp_solutions`: the seeds' first, as
+    ``plan_to_pose`` finds them), each kept only when the straight line to the grasp
+    (the item ``name`` out of the scene: the fingers touch it) is continuous and free.
+    The UR3e near the end of its reach has two families at a lower-board pre-grasp, and
+    from the one a seed can fall into (shoulder down) the line meets a singularity or
+    folds the forearm into the base (the UR3e lab crowd trial 8, seed 294338835; seed
+    269668801: 'joint jump' and 'forearm vs mobile_base_link at 86 %'), while from the
+    other it is free. When no solution's line is free, PLANNING "grasp approach: REASON"
+    before the arm moves (REASON the first solution's)."""
+    first_line: PlanResult | None = None
+    tried = 0
+    for q_goal in _pre_grasp_solutions(ws, q, poses.pre_grasp, seeds):
+        if ws.planner.stop.is_set():
+            return PlanResult(False, CANCELLED)
+        tried += 1
+        ws.scene.remove_item(name)
+        try:
+            line = ws.planner.cartesian_path(q_goal, poses.grasp, config=cfg)
+        finally:
+            ws.scene.add_item(name, size, T_item)
+        if line.success:
+            if tried > 1:
+                log.info("pre-grasp: IK solution %d of the pre-grasp is the first the grasp approach is free from "
+                         "(the first: %s)", tried, first_line.reason if first_line else "")
+            return ws.planner.plan(q, q_goal, cfg)
+        if line.reason == CANCELLED:
+            return line
+        first_line = first_line or line
+    if first_line is None:  # no collision-free IK: plan_to_pose's own reason
+        return ws.planner.plan_to_pose(q, poses.pre_grasp, ik_seeds=seeds, config=cfg)
+    return PlanResult(False, f"grasp approach: {first_line.reason} (from every one of {tried} IK solutions "
+                             f"of the pre-grasp)", first_line.planning_time)
+
+
+#: random IK starts :func:`_pre_grasp_solutions` tries after the seeds (deterministic:
+#: the IK's own generator seeded 0, 1, ...)
+PRE_GRASP_STARTS = 40
+
+
+def _pre_grasp_solutions(ws: ArmWorkspace, q: list[float], T: np.ndarray,
+                         seeds: list[list[float]]) -> Iterator[np.ndarray]:
+    """(worker thread) Distinct collision-free IK solutions [rad] of the tool pose ``T``
+    (arm base): from each of ``seeds`` in turn, then from ``q`` with restarts (the order
+    ``ArmPlanner.plan_to_pose`` takes, so its goal comes first), then from
+    :data:`PRE_GRASP_STARTS` random starts. Two solutions are the same when no joint
+    differs by more than 0.05 rad (angles compared modulo a turn)."""
+    kin, valid = ws.kin, ws.scene.is_valid
+    found: list[np.ndarray] = []
+
+    def new(sol: np.ndarray | None) -> bool:
+        if sol is None:
+            return False
+        if any(float(np.max(np.abs(np.remainder(sol - f + math.pi, math.tau) - math.pi))) < 0.05 for f in found):
+            return False
+        found.append(sol)
+        return True
+
+    for s in seeds:
+        sol = kin.ik(T, s, attempts=1, is_valid=valid)
+        if new(sol):
+            yield sol
+    sol = kin.ik(T, q, attempts=20, is_valid=valid)
+    if new(sol):
+        yield sol
+    for k in range(PRE_GRASP_STARTS):
+        if ws.planner.stop.is_set():
+            return
+        sol = kin.ik(T, None, seed=k, attempts=1, is_valid=valid)
+        if new(sol):
+            yield sol
 
 
 def _place_frame(place: Sequence[float], base_xy: tuple[float, float]) -> np.ndarray:
