@@ -157,7 +157,9 @@ def look(ctx: SkillContext, marker: int, frames: int, *, record_all: bool = True
     cam = ctx.robot.camera
     if cam is None:
         raise SkillFailure(FailureKind.PRECONDITION, "marker detection needs a camera, and this robot has none")
-    det = detector(ctx)  # without wanted ids it searches the whole image: new views are covered
+    # wanting the marker: when the downscaled pass finds only others (a small marker at the
+    # image's edge), the full-resolution pass still looks for it; every marker is returned
+    det = detector(ctx)
     est = MarkerPoseEstimator(min_samples=1, window=max(1, frames))
     others: dict[int, Any] = {}
     closest = np.inf
@@ -166,7 +168,7 @@ def look(ctx: SkillContext, marker: int, frames: int, *, record_all: bool = True
         frame = yield from next_frame(ctx, cam)
         got += 1
         seen = False
-        for ob in observe_markers(frame, det):
+        for ob in observe_markers(frame, det, want={marker}):
             if ob.id == marker:
                 est.add(depth_oriented(ob, frame))
                 closest = min(closest, ob.distance)

@@ -391,14 +391,16 @@ def observe_markers(
     ids: set[int] | None = None,
     *,
     marker_length: float | None = None,
+    want: set[int] | None = None,
 ) -> list[MarkerObservation]:
     """Detect markers in ``frame`` (optionally only ``ids``), estimate each pose, refine it
     with the frame's depth image when there is one, and express it in ``map`` through
     ``T_map_base @ T_base_camera``. ``marker_length`` [m] overrides the detector's.
-    ``ids`` are also the detector's wanted ids (see :meth:`MarkerDetector.detect`)."""
+    ``ids`` are also the detector's wanted ids (see :meth:`MarkerDetector.detect`);
+    ``want``: wanted ids when every marker is returned (``ids`` None)."""
     cfg = detector.config
     length = marker_length if marker_length is not None else cfg.marker_length
-    dets = detector.detect(frame.rgb, want=ids)
+    dets = detector.detect(frame.rgb, want=ids if ids is not None else want)
     out: list[MarkerObservation] = []
     T_map_cam = np.asarray(frame.T_map_base) @ np.asarray(frame.T_base_camera)
     for d in dets:
