@@ -163,14 +163,17 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
         for old in list(ws.scene.items):
             ws.scene.remove_item(old)
         ws.scene.add_item(name, size, T_item)
-        return _plan_pre_grasp(ws, q, poses, seeds, cfg, name, size, T_item)
+        return _plan_pre_grasp(ws, q, poses, seeds, cfg, name, size, T_item, changed)
 
+    changed: list[tuple[int, str]] = []  # (solution, the first's reason) when not the first
     g = ctx.robot.gripper
     assert g is not None
     opening = g.open(force=arm.grasp_force)  # opens while the plan is computed
     res = yield from off_tick(ctx, ws, plan_pre_grasp)
     ctx.emit("scene_update", op="add", item=name, node=ctx.node_path)
     pre = planned(ctx, res, "pre-grasp")
+    for solution, first in changed:
+        ctx.emit("pre_grasp_changed", solution=solution, first=first, node=ctx.node_path)
     yield from wait_goal(ctx, opening, timeout=GRIPPER_TIMEOUT)
     yield from execute(ctx, pre, "pre-grasp")
     q = measured_joints(ctx)
@@ -228,7 +231,7 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
 
 def _plan_pre_grasp(ws: ArmWorkspace, q: list[float], poses: GraspPoses, seeds: list[list[float]],
                     cfg: PlannerConfig, name: str, size: tuple[float, float, float],
-                    T_item: np.ndarray) -> PlanResult:
+                    T_item: np.ndarray, changed: list[tuple[int, str]] | None = None) -> PlanResult:
     """(worker thread) A plan to the pre-grasp (arm base frame) whose IK solution the
     straight grasp approach can start from: the collision-free IK solutions of the
     pre-grasp in turn (:func:`_pre_grasp_solutions`: the seeds' first, as
@@ -239,7 +242,8 @@ def _plan_pre_grasp(ws: ArmWorkspace, q: list[float], poses: GraspPoses, seeds: 
     folds the forearm into the base (the UR3e lab crowd trial 8, seed 294338835; seed
     269668801: 'joint jump' and 'forearm vs mobile_base_link at 86 %'), while from the
     other it is free. When no solution's line is free, PLANNING "grasp approach: REASON"
-    before the arm moves (REASON the first solution's)."""
+    before the arm moves (REASON the first solution's). ``changed`` gets (the solution's
+    1-based number, the first one's reason) when the plan is not to the first solution."""
     first_line: PlanResult | None = None
     tried = 0
     for q_goal in _pre_grasp_solutions(ws, q, poses.pre_grasp, seeds):
@@ -252,9 +256,11 @@ def _plan_pre_grasp(ws: ArmWorkspace, q: list[float], poses: GraspPoses, seeds: 
         finally:
             ws.scene.add_item(name, size, T_item)
         if line.success:
-            if tried > 1:
+            if first_line is not None:
                 log.info("pre-grasp: IK solution %d of the pre-grasp is the first the grasp approach is free from "
-                         "(the first: %s)", tried, first_line.reason if first_line else "")
+                         "(the first: %s)", tried, first_line.reason)
+                if changed is not None:
+                    changed.append((tried, first_line.reason))
             return ws.planner.plan(q, q_goal, cfg)
         if line.reason == CANCELLED:
             return line

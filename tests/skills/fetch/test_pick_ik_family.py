@@ -80,8 +80,10 @@ def test_the_pre_grasp_goes_to_the_family_the_straight_approach_is_free_from(ur3
     assert not line.success and "% of the straight line" in line.reason
     ur3e.scene.add_item("item", ITEM, T_item)
 
-    res = _plan_pre_grasp(ur3e, LOOK, poses, [seed], ur3e.planner.config, "item", ITEM, T_item)
+    changed: list[tuple[int, str]] = []
+    res = _plan_pre_grasp(ur3e, LOOK, poses, [seed], ur3e.planner.config, "item", ITEM, T_item, changed)
     assert res.success, res.reason
+    assert len(changed) == 1 and changed[0][0] > 1 and changed[0][1] == line.reason
     q_pre = np.array(res.path[-1])
     assert ur3e.kin.fk(q_pre)[:3, 3] == pytest.approx(poses.pre_grasp[:3, 3], abs=1e-3)
     assert float(np.max(np.abs(q_pre - np.array(first.path[-1])))) > 0.5  # another family
@@ -99,8 +101,9 @@ def test_where_the_first_family_is_free_the_plan_is_plan_to_poses(ur3e):
     picks, whose seeds' solutions are free, plan what they planned before)."""
     poses, T_item, seed = _set_up(ur3e, 6, 0.74)
     before = ur3e.planner.plan_to_pose(LOOK, poses.pre_grasp, ik_seeds=[seed])
-    res = _plan_pre_grasp(ur3e, LOOK, poses, [seed], ur3e.planner.config, "item", ITEM, T_item)
-    assert before.success and res.success
+    changed: list[tuple[int, str]] = []
+    res = _plan_pre_grasp(ur3e, LOOK, poses, [seed], ur3e.planner.config, "item", ITEM, T_item, changed)
+    assert before.success and res.success and not changed
     assert res.path[-1] == pytest.approx(before.path[-1], abs=1e-12)
     assert res.path == before.path
 
