@@ -269,6 +269,21 @@ class RollingCostmap:
         self.pinned[:] = False
         self._refresh()
 
+    def clear_disc(self, centre: tuple[float, float], radius: float) -> int:
+        """Forget the marks (not the pinned ones) whose cell centre lies within ``radius``
+        [m] of ``centre`` (map, [m]): where the base stands nothing else can (a mark
+        there is the robot's own body, or an old one it has since driven onto). Returns
+        how many were cleared."""
+        mi, mj = np.nonzero(self.marks & ~self.pinned)
+        if radius <= 0.0 or not mi.size:
+            return 0
+        c = self._centres_of(mi, mj)
+        gone = np.hypot(c[:, 0] - centre[0], c[:, 1] - centre[1]) <= radius
+        if gone.any():
+            self.marks[mi[gone], mj[gone]] = False
+            self._refresh()
+        return int(gone.sum())
+
     def pin(self, xy: np.ndarray) -> int:
         """Mark the cells holding the map points ``xy`` (m, 2) [m] as obstacles the lidar's
         clearing never removes (what a bumper or cliff sensor found); returns how many

@@ -45,6 +45,7 @@ from mmexec.skills.navigation.obstacles import (
     Circles,
     ObstacleConfig,
     detect_obstacles,
+    drop_within,
     scan_to_map,
 )
 from mmexec.skills.navigation.social import PeopleWait, SocialConfig, speed_scale
@@ -60,6 +61,11 @@ WAIT_SPEED = 0.05
 #: too (:meth:`LocalPlanner.replan_grid`): the lidar's hits on them and the trail behind
 #: someone who walked up to the base, which their own body hides from the lidar
 PERSON_TRAIL = 0.25
+#: the lidar's hits within this fraction of the footprint radius of the base's centre are
+#: the robot itself, and the costmap's marks there are cleared (:meth:`LocalPlanner.observe`):
+#: the inscribed circle of a box base is at least 0.6 of the circumscribed one up to a 4:3
+#: aspect (the UR platform's 0.62 x 0.52 m box: 0.26 of 0.405 m; a round base: all of it)
+SELF_FRACTION = 0.6
 
 
 def barrier_fields(f: CbfResult | None, circles: Circles, pose: Pose2D, v_meas: float) -> dict[str, Any]:
@@ -194,9 +200,18 @@ class LocalPlanner:
 
     def observe(self, scan: LaserScan, pose: Pose2D) -> Circles:
         """Update the costmap and the tracks with ``scan``, taken with the base at
-        ``pose`` in ``map``; returns the tracked circles at the scan's stamp."""
-        pts = scan_to_map(scan, pose, self.config.costmap.clear_range)
+        ``pose`` in ``map``; returns the tracked circles at the scan's stamp. Hits within
+        :data:`SELF_FRACTION` of the footprint radius of the base's centre are the robot
+        itself and are dropped, and the marks there cleared: the UR platforms' lidar, at
+        the front of the base, now and then returned off the arm's base behind it, 0.05-0.1 m
+        ahead of the centre; the marks stayed (the lidar's clearing starts past its
+        minimum range), a trail of them was left along the way, and one under the base made
+        the path ahead look blocked for good (corridors, seed 448725815: stuck 0.4 m short of
+        the marker's viewpoint and at each stand-off)."""
+        own = SELF_FRACTION * self.config.limits.radius
+        pts = drop_within(scan_to_map(scan, pose, self.config.costmap.clear_range), (pose.x, pose.y), own)
         new = self.costmap.update(pts)
+        self.costmap.clear_disc((pose.x, pose.y), own)
         detections = detect_obstacles(pts, new, self.config.obstacles)
         self._tracks = self.tracker.update(detections, scan.stamp)
         self._t_tracks = scan.stamp

@@ -30,7 +30,7 @@ Frames: points and circles are in ``map`` [m]; velocities [m/s] in ``map``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,6 +43,7 @@ __all__ = [
     "ScanPoints",
     "cluster_points",
     "detect_obstacles",
+    "drop_within",
     "fit_circles",
     "scan_to_map",
 ]
@@ -185,6 +186,22 @@ def scan_to_map(scan: LaserScan, pose: Pose2D, clear_range: float) -> ScanPoints
     mirrored = float(np.linalg.det(R)) < 0.0
     increment = -scan.angle_increment if mirrored else scan.angle_increment
     return ScanPoints(origin, directions, hit, xy, free, full, angle0, float(increment))
+
+
+def drop_within(points: ScanPoints, centre: tuple[float, float], radius: float) -> ScanPoints:
+    """``points`` with the hits within ``radius`` [m] of ``centre`` (map, [m]) taken as
+    beams not measured (no hit, nothing seen free): returns off the robot's own body
+    (a base-mounted lidar's beams that meet the arm's base behind it), which say nothing
+    about the room beyond. ``radius`` <= 0: ``points`` unchanged."""
+    if radius <= 0.0 or not points.hit.any():
+        return points
+    with np.errstate(invalid="ignore"):
+        own = points.hit & (np.hypot(points.xy[:, 0] - centre[0], points.xy[:, 1] - centre[1]) < radius)
+    if not own.any():
+        return points
+    xy = points.xy.copy()
+    xy[own] = np.nan
+    return replace(points, hit=points.hit & ~own, xy=xy, free=np.where(own, 0.0, points.free))
 
 
 def cluster_points(xy: np.ndarray, gap: float, max_radius: float, *, wrap: bool = False) -> np.ndarray:
