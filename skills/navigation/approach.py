@@ -80,7 +80,7 @@ def approach(ctx: SkillContext, marker: int, distance: float | None = None, dist
                             angle_offsets=(0.0,), start=(base.state().pose.x, base.state().pose.y))
         if mid.ok and mid.pose is not None:
             yield from drive_path(ctx, mid.pose, f"marker {marker} viewpoint", timeout=limit,
-                                  path=simplify_path(cm, mid.path) if mid.path else None)
+                                  path=simplify_path(cm, mid.path) if mid.path else None, viewpoint=True)
             better = yield from look(ctx, marker, camera_settings(ctx).detect_frames)
             if better is not None:
                 est = better

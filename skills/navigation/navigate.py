@@ -216,8 +216,9 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
     plain drive brakes and plans again from the new pose (``nav_replan``, at most
     :data:`MAX_JUMP_REPLANS` times). Cancellation brakes the base before re-raising.
     ``viewpoint``: the goal is a place to look from, which the local planner may move out
-    of an unmapped obstacle's zone (LocalDriveConfig.zone_goal_search). Returns the pose
-    reached."""
+    of an unmapped obstacle's zone (LocalDriveConfig.zone_goal_search), and may take
+    from up to :data:`VIEW_SHORT` short of it when stuck there (people in the way;
+    LocalDriveConfig.view_slack). Returns the pose reached."""
     base = ctx.robot.base
     if base is None:
         raise SkillFailure(FailureKind.PRECONDITION, "navigation needs a base, and this robot has none")
@@ -232,7 +233,7 @@ def drive_path(ctx: SkillContext, goal: Pose2D, label: str, *, timeout: float, m
             goal = _free_goal(ctx, cm, goal, label)
         config = local_drive_config(ctx, base, max_v)
         if viewpoint:
-            config = replace(config, zone_goal_search=VIEWPOINT_SLACK)
+            config = replace(config, zone_goal_search=VIEWPOINT_SLACK, view_slack=VIEW_SHORT)
         drive = LocalDrive(ctx, base, lidar, goal, label, config=config, static=cm,
                            timeout=timeout, path=path, status=base_status)
         return (yield from drive.run())
@@ -278,6 +279,9 @@ MAX_JUMP_REPLANS = 3
 #: [m] how far the local planner may move a viewpoint goal out of an unmapped obstacle's
 #: zone (``drive_path(..., viewpoint=True)``: the search's locations)
 VIEWPOINT_SLACK = 0.6
+#: [m] a viewpoint drive stuck this near its goal looks from where it stands (the local
+#: planner: ``drive_path(..., viewpoint=True)``)
+VIEW_SHORT = 0.8
 
 
 def _require_localised(ctx: SkillContext, base: Base, label: str) -> None:

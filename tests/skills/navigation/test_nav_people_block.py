@@ -4,9 +4,13 @@ standing in a passage are waited for, not taken for a wall that closes every way
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 
 from mmexec.drivers.interfaces import OccupancyGrid, Pose2D
+from mmexec.skills.base import SkillFailure
 from mmexec.skills.navigation.astar import plan_path
 from mmexec.skills.navigation.costmap import RollingCostmap
 from mmexec.skills.navigation.grid import inflate, world_to_cell
@@ -74,3 +78,50 @@ def test_merged_grid_ignores_marks_in_the_discs_but_not_pinned_ones():
         assert merged.data[world_to_cell(grid, *xy)] == 0
     assert merged.data[world_to_cell(grid, 4.0, 1.25)] == 100
     assert (cm.merged_grid().data[cm.marks.nonzero()[0] + cm.r0, cm.marks.nonzero()[1] + cm.c0] == 100).all()
+
+
+def _walk_then_stand(t: float) -> tuple[float, float, float]:
+    """A person (0.2 m) walking west along y = 1.5 from x = 5.5 at 0.5 m/s, standing at
+    x = 4.2 from t = 2.6 s on: 0.2 m beyond a viewpoint at (4.0, 1.5)."""
+    return (max(4.2, 5.5 - 0.5 * t), 1.5, 0.2)
+
+
+def _drive_among(viewpoint: bool, events: list) -> tuple[Pose2D | None, SkillFailure | None]:
+    from test_nav_local_drive import _ctx, _robot, room
+
+    from mmexec.skills.navigation.navigate import drive_path
+
+    robot = _robot(room(), Pose2D(1.0, 1.5, 0.0), circles=[_walk_then_stand(0.0)], nav={"recoveries": 1})
+    ctx = _ctx(robot, events)
+    gen = drive_path(ctx, Pose2D(4.0, 1.5, 0.0), "the viewpoint", timeout=90.0, viewpoint=viewpoint)
+    t0 = robot.clock.now()
+    try:
+        for _ in range(4000):
+            next(gen)
+            robot.spin(0.05)
+            robot.lidar.circles = [_walk_then_stand(robot.clock.now() - t0)]
+    except StopIteration as stop:
+        return stop.value, None
+    except SkillFailure as failure:
+        return None, failure
+    raise AssertionError("the drive did not end")
+
+
+@pytest.mark.slow
+def test_a_viewpoint_someone_stands_by_is_looked_from_short_of_it():
+    """Someone walks up and stands 0.2 m beyond a viewpoint: the base, kept out of the
+    zone round them (and the DWA's look-ahead), waits its patience, then looks from where
+    it stands (within VIEW_SHORT), turned to the viewpoint's heading. Any other goal
+    keeps trying and fails after its recoveries."""
+    from mmexec.skills.navigation.navigate import VIEW_SHORT
+
+    events: list = []
+    end, failure = _drive_among(True, events)
+    assert failure is None and end is not None
+    short = [f for e, f in events if e == "nav_view_short"]
+    assert len(short) == 1 and 0.0 < short[0]["short"] <= VIEW_SHORT
+    assert end.distance_to(Pose2D(4.0, 1.5)) <= VIEW_SHORT and abs(end.theta) <= 0.05
+    assert math.hypot(end.x - 4.2, end.y - 1.5) > 0.2 + 0.178             # never into them
+    events.clear()
+    end, failure = _drive_among(False, events)
+    assert end is None and failure is not None and not [e for e, _ in events if e == "nav_view_short"]
