@@ -310,18 +310,19 @@ class LocalDrive:
         self.jump_replans = 0
 
     # ------------------------------------------------------------------ planning
-    def _inflated(self, now: float, widen: float = 0.0) -> CostMap:
+    def _inflated(self, now: float, widen: float = 0.0, *, everyone: bool = False) -> CostMap:
         """The map to plan on now: the static one, or with what the lidar and the
         contact sensors found written in (when they found anything), except under the
         base's own footprint: the base stands there, so what was marked there (the trail
         of someone who walked past, a circle drawn round a person not yet told from
-        furniture) is not there, and A* must be able to start."""
+        furniture) is not there, and A* must be able to start. ``everyone``: people
+        written in too (LocalPlanner.replan_grid)."""
         cm = self.planner.costmap
         tracks = self.planner.circles_at(now)
-        if not cm.marks.any() and not np.any(~tracks.person):
+        if not cm.marks.any() and not np.any(~tracks.person) and not (everyone and len(tracks.radii)):
             return self.static
         lim = self.config.planner.limits
-        grid = self.planner.replan_grid(now, widen)
+        grid = self.planner.replan_grid(now, widen, everyone=everyone)
         pose = self.base.state().pose
         data = np.array(grid.data, copy=True)
         rows, cols = np.indices(data.shape)
@@ -1094,7 +1095,11 @@ class LocalDrive:
                 raise self._fail(FailureKind.PLANNING,
                                  f"no path to {self.label}: the goal is {inside:.2f} m from an obstacle the map does "
                                  f"not show, inside the zone the safety filter keeps the base out of", "blocked")
-            if self._no_way:
+            # no way left even if everyone the re-plans leave out as people stays where
+            # they are (a tracked circle taken for a person can be furniture whose
+            # visible side wandered as the base drove by): blocked, a planning failure
+            if self._no_way or self._plan_on(self._inflated(self.ctx.clock.now(), everyone=True),
+                                             self.base.state().pose, "blocked", log_none=False) is None:
                 raise self._fail(FailureKind.PLANNING,
                                  f"no path to {self.label}: blocked by obstacles the map does not show "
                                  f"({self.config.recoveries} recoveries, {self.replans} re-plans)", "blocked")

@@ -222,7 +222,7 @@ class LocalPlanner:
         c = self._tracks
         return replace(c, centres=c.at_time(max(0.0, now - self._t_tracks)))
 
-    def replan_grid(self, now: float, widen: float = 0.0) -> OccupancyGrid:
+    def replan_grid(self, now: float, widen: float = 0.0, *, everyone: bool = False) -> OccupancyGrid:
         """The map to re-plan on when the path is blocked: the static map, the costmap's
         marks and the non-person circles (as discs of their covering radius plus the
         filter's look-ahead, so that the inflated map keeps the planned path out of the
@@ -233,9 +233,10 @@ class LocalPlanner:
         :data:`PERSON_TRAIL` of their circle (cells the lidar has not seen free since,
         behind someone who walked up to the base), are left out with them: with them
         in, two people standing by the base closed every way and the drive failed "no
-        path" while only people were in the way."""
+        path" while only people were in the way. ``everyone``: every circle, people too,
+        written in where it stands (whether any way is left while they all stay put)."""
         c = self.circles_at(now)
-        keep = ~c.person
+        keep = np.ones(len(c.radii), dtype=bool) if everyone else ~c.person
         if self.people_wait.spent:
             keep |= np.hypot(c.velocities[:, 0], c.velocities[:, 1]) <= self.config.tracking.moving_speed
         gone = c.select(~keep)

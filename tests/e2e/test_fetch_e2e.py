@@ -143,10 +143,14 @@ def test_blocked_standoff_uses_the_approach_distance_recovery(tmp_path: Path) ->
     assert _outcomes(run) == ["failure", "success"], run.out
     case2 = run.recoveries("/approach", request=1)
     assert len(case2) == 2
-    assert all("stand-off" in r["reason"] for r in case2)
-    # each attempt asked for the next distance of the profile's list
+    # each attempt asked for the next distance of the profile's list, found no free
+    # stand-off, and the holistic planner (the approach's fallback) found no base pose in
+    # the blocked area either: its failure is the attempt's reason
+    assert all(r["reason"].startswith("holistic plan: no base pose") for r in case2)
     approaches = [r for r in run.events("skill_failure", request=1) if r.get("skill") == "approach"]
-    assert len(approaches) == 3 and all(r["kind"] == "planning" for r in approaches)
+    assert len(approaches) == 3 and all(r["kind"] == "planning" and "no free stand-off" in r["reason"] for r in approaches)
+    holistic = [r for r in run.events("skill_failure", request=1) if r.get("skill") == "holistic_standoff"]
+    assert len(holistic) == 3 and all(r["kind"] == "planning" for r in holistic)
     assert [g["node"].rsplit("/", 1)[-1] for g in run.events("recovery_give_up", request=1)] == ["approach"]
     # a reset, not an arm failure: no pick was tried, and case 1's recovery declined at
     # once (its condition sees approach.outcome == gave_up) instead of searching again

@@ -294,13 +294,17 @@ def test_a_way_closed_for_good_is_a_planning_failure_after_the_recoveries(events
     recoveries = _of(events, "nav_recovery")
     assert [r["attempt"] for r in recoveries] == [1]
     assert robot.base.pose.x < 3.0 - 0.2 - 0.178
-    # a second drive starts with the crates in the costmap: no way on it, so it starts on
-    # the map's way (the marks might be people standing by) and fails only after its
-    # recoveries, not at once
+    # a second drive starts with the crates in the costmap and fails only after its
+    # recoveries, not at once: with no way on the marks it starts on the map's way (the
+    # marks might be people standing by); the tracker may also have taken some crates,
+    # whose visible sides wandered as the base drove along them, for people standing,
+    # whom a re-plan leaves out: then its start plan goes between them. Either way the
+    # drive ends PLANNING: no way is left with everyone written in where they stand
     events.clear()
     again = _drive(robot, ctx, x=5.0, y=1.5)
     assert again.status is SkillStatus.FAILURE and again.failure.kind is FailureKind.PLANNING
-    assert [p["why"] for p in _of(events, "nav_plan")][:2] == ["start", "start on the map"]
+    plans = _of(events, "nav_plan")
+    assert plans[0]["why"] == "start" and (plans[0]["found"] or plans[1]["why"] == "start on the map")
     assert len(_of(events, "nav_recovery")) == 1
 
 
