@@ -59,7 +59,13 @@ from mmexec.skills.manipulation.arm import (
 )
 from mmexec.skills.manipulation.holistic_skill import holistic_seed
 from mmexec.skills.navigation.navigate import back_off
-from mmexec.skills.perception.detect import markers
+from mmexec.skills.perception.detect import (
+    MarkerEstimate,
+    camera_settings,
+    emit_estimate,
+    look,
+    markers,
+)
 
 __all__ = ["pick", "place"]
 
@@ -88,6 +94,24 @@ FINGER_AXIS = 1
 #: after each release and retract the fingers close to stow; closing on something means the
 #: released item came along (caught on the fingers), so it is taken back down and let go again.
 PLACE_RELEASES = 3
+
+#: [m] with a camera on the arm (profile ``arm.look`` set), a marker estimate seen from
+#: farther than this is looked at again from close before the pick plans its grasp
+#: (:func:`_look_closer`): the UR3e's wrist camera does not see the lower board from its
+#: stand-off, and an estimate from 1.25 m was 2.5 cm off sideways and 1.9 cm in depth,
+#: enough to grasp the box off-centre and drop it on the way to the carry pose.
+LOOK_CLOSER_FROM = 0.9
+
+#: The camera poses of that look, tried in order: [m] from the marker along its normal,
+#: [m] above its centre, the camera's optical axis through the marker centre; each also
+#: rolled 0, 180, 90 and -90 degrees about that axis (:data:`CLOSE_LOOK_ROLLS`). The UR3e
+#: at a 0.74 m stand-off reaches a lower-board marker's 0.35 m views, 5-15 cm up, not the
+#: level ones from 0.4 m or more (the arm would fold back over the base).
+CLOSE_LOOKS = ((0.35, 0.15), (0.35, 0.05), (0.40, 0.20), (0.30, 0.10))
+CLOSE_LOOK_ROLLS = (0.0, math.pi, math.pi / 2, -math.pi / 2)
+
+#: [s] the arm rests this long at the close look before the camera's frames are taken
+CLOSE_LOOK_SETTLE = 0.3
 
 #: The retracts :func:`_free_retract` falls back to, in order, when the profile's is not
 #: free: straight up (map z) by the profile retract's length; up as much and half of it
@@ -148,6 +172,8 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     ws = workspace(ctx)
     cfg = ws.config(algorithm, time_limit, attempts)
     T_am = T_armbase_map(ctx)
+    if arm.look is not None and ctx.robot.camera is not None and est.distance > LOOK_CLOSER_FROM:
+        est = yield from _look_closer(ctx, ws, cfg, marker, est, T_am)
     T_am_marker = T_am @ est.T_map_marker
     name = f"item_{marker}"
     T_item, size = _item_pose_and_size(prof, T_am_marker)
@@ -227,6 +253,83 @@ def _pick_steps(ctx: SkillContext, marker: int, algorithm: str | None, time_limi
     if not held:
         raise SkillFailure(FailureKind.POSTCONDITION, f"item of marker {marker} lost after lifting it ({why})")
     return {"item": name}
+
+
+def _look_closer(ctx: SkillContext, ws: ArmWorkspace, cfg: PlannerConfig, marker: int, est: MarkerEstimate,
+                 T_am: np.ndarray) -> Generator[None, None, MarkerEstimate]:
+    """Move the arm's camera to look at marker ``marker`` from close (:data:`CLOSE_LOOKS`:
+    the first camera pose with a collision-free plan, the item from the estimate in the
+    scene) and look again; seen: the new estimate (event ``marker_estimate``), else the
+    old one. Event ``pick_look`` (marker, seen, estimated_from: the old estimate's distance [m],
+    camera: the camera-marker distance of the pose used, or None when none was reachable)."""
+    prof = fetch_profile(ctx)
+    cam = ctx.robot.camera
+    assert cam is not None
+    arm = ctx.robot.arm
+    assert arm is not None
+    q = measured_joints(ctx)
+    # the camera in the tool frame, from where both are now (the camera rides on the arm)
+    T_tool_cam = (np.linalg.inv(ws.kin.fk(q)) @ np.linalg.inv(np.asarray(arm.mount, dtype=float))
+                  @ np.asarray(cam.pose_in_base(), dtype=float))
+    T_am_marker = T_am @ est.T_map_marker
+    T_item, size = _item_pose_and_size(prof, T_am_marker)
+    name = f"item_{marker}"
+    boxes = ctx.robot.scene
+    used: list[float] = []
+
+    def plan_look() -> PlanResult:
+        ws.scene.set_static_boxes(boxes, T_am)
+        for old in list(ws.scene.items):
+            ws.scene.remove_item(old)
+        ws.scene.add_item(name, size, T_item)
+        res = PlanResult(False, "no camera pose")
+        try:
+            for dist, up in CLOSE_LOOKS:
+                for roll in CLOSE_LOOK_ROLLS:
+                    T_tool = _camera_aimed(T_am_marker, dist, up, roll) @ np.linalg.inv(T_tool_cam)
+                    res = ws.planner.plan_to_pose(q, T_tool, ik_seeds=[q], ik_attempts=20, config=cfg)
+                    if res.success or res.reason == CANCELLED:
+                        used.append(dist)
+                        return res
+        finally:
+            ws.scene.remove_item(name)
+        return res
+
+    res = yield from off_tick(ctx, ws, plan_look)
+    if not res.success or res.trajectory is None:
+        log.info("pick: no close look at marker %d (%s); the estimate from %.2f m stays", marker, res.reason,
+                 est.distance)
+        ctx.emit("pick_look", marker=marker, seen=False, estimated_from=round(est.distance, 3), camera=None,
+                 node=ctx.node_path)
+        return est
+    yield from execute(ctx, planned(ctx, res, "close look"), "close look")
+    end = ctx.clock.now() + CLOSE_LOOK_SETTLE
+    while ctx.clock.now() < end - 1e-9:
+        yield
+    new = yield from look(ctx, marker, camera_settings(ctx).detect_frames)
+    ctx.emit("pick_look", marker=marker, seen=new is not None, estimated_from=round(est.distance, 3),
+             camera=used[0] if used else None, node=ctx.node_path)
+    if new is None:
+        log.info("pick: marker %d not seen from the close look; the estimate from %.2f m stays", marker, est.distance)
+        return est
+    emit_estimate(ctx, new)
+    return new
+
+
+def _camera_aimed(T_marker: np.ndarray, dist: float, up: float, roll: float) -> np.ndarray:
+    """A camera (optical) pose, same frame as ``T_marker``: ``dist`` [m] out along the
+    marker's normal and ``up`` [m] higher, its z through the marker's centre, its x
+    horizontal (to the right, y down: the image upright), turned by ``roll`` [rad] about z."""
+    c = T_marker[:3, 3] + T_marker[:3, 2] * dist + np.array([0.0, 0.0, up])
+    z = T_marker[:3, 3] - c
+    z /= np.linalg.norm(z)
+    x = np.cross(z, [0.0, 0.0, 1.0])  # image x to the right, y down: upright
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    cr, sr = math.cos(roll), math.sin(roll)
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2], T[:3, 3] = cr * x + sr * y, -sr * x + cr * y, z, c
+    return T
 
 
 def _plan_pre_grasp(ws: ArmWorkspace, q: list[float], poses: GraspPoses, seeds: list[list[float]],

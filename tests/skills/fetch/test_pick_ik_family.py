@@ -117,3 +117,24 @@ def test_no_free_approach_from_any_solution_fails_before_the_arm_moves(ur3e):
     assert res.reason.startswith("grasp approach: ")
     assert "IK solutions of the pre-grasp)" in res.reason
     assert res.trajectory is None
+
+
+def test_the_close_look_aims_the_camera_at_the_marker_centre():
+    """``_camera_aimed``: the camera pose of the pick's close look (an estimate from far,
+    a camera on the arm): DIST out along the marker's normal, UP higher, optical z through
+    the marker's centre, x horizontal before the roll."""
+    from mmexec.skills.fetch.arm import _camera_aimed
+
+    T_marker = np.eye(4)  # upright, its normal along map -x
+    T_marker[:3, 0], T_marker[:3, 1], T_marker[:3, 2] = [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]
+    T_marker[:3, 3] = [1.0, 0.5, 0.3]
+    for roll in (0.0, math.pi, math.pi / 2):
+        T = _camera_aimed(T_marker, 0.35, 0.05, roll)
+        assert T[:3, :3] @ T[:3, :3].T == pytest.approx(np.eye(3), abs=1e-12)
+        assert np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
+        assert T[:3, 3] == pytest.approx([0.65, 0.5, 0.35])
+        ray = T_marker[:3, 3] - T[:3, 3]
+        assert np.cross(T[:3, 2], ray) == pytest.approx(np.zeros(3), abs=1e-12) and T[:3, 2] @ ray > 0
+        if roll == 0.0:
+            assert T[2, 0] == pytest.approx(0.0, abs=1e-12)  # x horizontal
+            assert T[2, 1] < 0  # image y (down) points down
