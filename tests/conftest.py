@@ -7,6 +7,7 @@ repository-level helpers.
 
 from __future__ import annotations
 
+import signal
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,6 +15,15 @@ from pathlib import Path
 import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+# A suite started where SIGINT is ignored (a background job of a non-interactive shell:
+# `.ci/run &`) would hand that on to every mmexec it spawns (an ignored signal stays
+# ignored across exec, and Python then installs no KeyboardInterrupt handler), and the
+# Ctrl-C tests would see a run that never heard it. Those tests are about what mmexec
+# does when interrupted, so the suite restores the default for its children (a handled
+# signal is reset to the default on exec).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture
