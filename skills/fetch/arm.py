@@ -282,12 +282,17 @@ def _look_closer(ctx: SkillContext, ws: ArmWorkspace, cfg: PlannerConfig, marker
         for old in list(ws.scene.items):
             ws.scene.remove_item(old)
         ws.scene.add_item(name, size, T_item)
-        res = PlanResult(False, "no camera pose")
+        res = PlanResult(False, "no collision-free IK for any camera pose")
         try:
             for dist, up in CLOSE_LOOKS:
                 for roll in CLOSE_LOOK_ROLLS:
                     T_tool = _camera_aimed(T_am_marker, dist, up, roll) @ np.linalg.inv(T_tool_cam)
-                    res = ws.planner.plan_to_pose(q, T_tool, ik_seeds=[q], ik_attempts=20, config=cfg)
+                    if ws.planner.stop.is_set():
+                        return PlanResult(False, CANCELLED)
+                    sol = ws.kin.ik(T_tool, q, attempts=20, is_valid=ws.scene.is_valid)
+                    if sol is None:
+                        continue
+                    res = ws.planner.plan(q, _nearest_turns(sol, q, ws.kin.lower, ws.kin.upper), cfg)
                     if res.success or res.reason == CANCELLED:
                         used.append(dist)
                         return res
@@ -316,6 +321,22 @@ def _look_closer(ctx: SkillContext, ws: ArmWorkspace, cfg: PlannerConfig, marker
     return new
 
 
+def _nearest_turns(q: np.ndarray, ref: Sequence[float], lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """``q`` [rad] with each joint moved by whole turns to the value nearest ``ref``
+    within [``lower``, ``upper``] (the same tool pose). The IK can return a UR wrist joint
+    (range +-2 turns) a turn away from where it is: from the UR3e's look pose
+    to a lower-board pre-grasp, wrist 1 went from -4.1 to +4.82 rad instead of -1.46 and
+    wrist 3 from 0 to -4.71 instead of +1.57, a 5.7 s motion sweeping the gripper round
+    (the target stage's upper board touched in 3-4 of 20 corridors trials, a passer-by in
+    one lab crowd trial)."""
+    out = np.array(q, dtype=float)
+    for i, (v, r, lo, hi) in enumerate(zip(out, ref, lower, upper)):
+        turns = [v + k * math.tau for k in range(-3, 4)]
+        inside = [c for c in turns if lo - 1e-9 <= c <= hi + 1e-9]
+        out[i] = min(inside, key=lambda c: abs(c - float(r)))
+    return out
+
+
 def _camera_aimed(T_marker: np.ndarray, dist: float, up: float, roll: float) -> np.ndarray:
     """A camera (optical) pose, same frame as ``T_marker``: ``dist`` [m] out along the
     marker's normal and ``up`` [m] higher, its z through the marker's centre, its x
@@ -338,7 +359,8 @@ def _plan_pre_grasp(ws: ArmWorkspace, q: list[float], poses: GraspPoses, seeds: 
     """(worker thread) A plan to the pre-grasp (arm base frame) whose IK solution the
     straight grasp approach can start from: the collision-free IK solutions of the
     pre-grasp in turn (:func:`_pre_grasp_solutions`: the seeds' first, as
-    ``plan_to_pose`` finds them), each kept only when the straight line to the grasp
+    ``plan_to_pose`` finds them, each joint the whole turns nearest where the arm is),
+    each kept only when the straight line to the grasp
     (the item ``name`` out of the scene: the fingers touch it) is continuous and free.
     The UR3e near the end of its reach has two families at a lower-board pre-grasp, and
     from the one a seed can fall into (shoulder down) the line meets a singularity or
@@ -384,8 +406,9 @@ def _pre_grasp_solutions(ws: ArmWorkspace, q: list[float], T: np.ndarray,
     """(worker thread) Distinct collision-free IK solutions [rad] of the tool pose ``T``
     (arm base): from each of ``seeds`` in turn, then from ``q`` with restarts (the order
     ``ArmPlanner.plan_to_pose`` takes, so its goal comes first), then from
-    :data:`PRE_GRASP_STARTS` random starts. Two solutions are the same when no joint
-    differs by more than 0.05 rad (angles compared modulo a turn)."""
+    :data:`PRE_GRASP_STARTS` random starts; each joint the whole turns nearest ``q``
+    (:func:`_nearest_turns`). Two solutions are the same when no joint differs by more
+    than 0.05 rad (angles compared modulo a turn)."""
     kin, valid = ws.kin, ws.scene.is_valid
     found: list[np.ndarray] = []
 
@@ -397,17 +420,20 @@ def _pre_grasp_solutions(ws: ArmWorkspace, q: list[float], T: np.ndarray,
         found.append(sol)
         return True
 
+    def near(sol: np.ndarray | None) -> np.ndarray | None:
+        return None if sol is None else _nearest_turns(sol, q, kin.lower, kin.upper)
+
     for s in seeds:
-        sol = kin.ik(T, s, attempts=1, is_valid=valid)
+        sol = near(kin.ik(T, s, attempts=1, is_valid=valid))
         if new(sol):
             yield sol
-    sol = kin.ik(T, q, attempts=20, is_valid=valid)
+    sol = near(kin.ik(T, q, attempts=20, is_valid=valid))
     if new(sol):
         yield sol
     for k in range(PRE_GRASP_STARTS):
         if ws.planner.stop.is_set():
             return
-        sol = kin.ik(T, None, seed=k, attempts=1, is_valid=valid)
+        sol = near(kin.ik(T, None, seed=k, attempts=1, is_valid=valid))
         if new(sol):
             yield sol
 

@@ -88,6 +88,10 @@ def test_the_pre_grasp_goes_to_the_family_the_straight_approach_is_free_from(ur3
     assert ur3e.kin.fk(q_pre)[:3, 3] == pytest.approx(poses.pre_grasp[:3, 3], abs=1e-3)
     assert float(np.max(np.abs(q_pre - np.array(first.path[-1])))) > 0.5  # another family
     assert "item" in ur3e.scene.items  # the item is back in the scene for the pre-grasp motion
+    # no joint turns further than half a turn where a whole turn less reaches the same pose
+    # (from the look pose the IK gave wrist 1 +4.82 rad for -1.46 and wrist 3 -4.71 for +1.57)
+    wraps = (ur3e.kin.upper - ur3e.kin.lower) >= 2 * math.pi
+    assert np.all(np.abs(q_pre - np.array(LOOK))[wraps] <= math.pi + 1e-9)
     ur3e.scene.remove_item("item")
     approach = ur3e.planner.cartesian_path(q_pre, poses.grasp)
     assert approach.success, approach.reason
@@ -97,8 +101,9 @@ def test_the_pre_grasp_goes_to_the_family_the_straight_approach_is_free_from(ur3
 
 def test_where_the_first_family_is_free_the_plan_is_plan_to_poses(ur3e):
     """The upper board (marker 6) from 0.74 m: the seed's solution already has a free
-    approach, so the goal is the one ``plan_to_pose`` takes (the LoCoBot's and the UR5e's
-    picks, whose seeds' solutions are free, plan what they planned before)."""
+    approach and its joints are the turns nearest the start, so the goal is the one
+    ``plan_to_pose`` takes (the LoCoBot's and the UR5e's picks, whose seeds' solutions
+    are free, plan what they planned before)."""
     poses, T_item, seed = _set_up(ur3e, 6, 0.74)
     before = ur3e.planner.plan_to_pose(LOOK, poses.pre_grasp, ik_seeds=[seed])
     changed: list[tuple[int, str]] = []
