@@ -56,14 +56,11 @@ from mmexec.skills.base import (
     wait_goal,
 )
 from mmexec.skills.manipulation.arm import arm_settings, move_named
-from mmexec.skills.navigation.local_drive import local_planner
-from mmexec.skills.navigation.local_planner import LocalPlanner
 from mmexec.skills.navigation.navigate import (
     drive_path,
-    local_drive_config,
-    nav_settings,
     rotate_by,
 )
+from mmexec.skills.navigation.people_watch import PeopleWatch
 from mmexec.skills.perception.detect import camera_settings, look
 from mmexec.skills.poses import base_pose, pose_list
 from mmexec.skills.primitives import brake
@@ -205,7 +202,7 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
         locs = locs[:max(0, max_locations)]
     progress = SearchProgress(marker)
     ctx.world[WORLD_SEARCH] = progress
-    watch = _PeopleWatch.for_search(ctx)
+    watch = _PeopleWatch.for_robot(ctx)
     base = ctx.robot.base
     assert base is not None
     deadline = ctx.clock.now() + timeout
@@ -232,31 +229,9 @@ def search(ctx: SkillContext, marker: int, step: float | None = None, turn: floa
     return found
 
 
-class _PeopleWatch:
+class _PeopleWatch(PeopleWatch):
     """The lidar's tracked people, kept up to date while the search stands and turns,
     and whether they stand in the camera's view (module docstring)."""
-
-    def __init__(self, ctx: SkillContext, planner: LocalPlanner) -> None:
-        self.ctx, self.planner = ctx, planner
-        self._stamp = -math.inf
-
-    @classmethod
-    def for_search(cls, ctx: SkillContext) -> _PeopleWatch | None:
-        """A watch with the run's local planner; None without ``nav.local_planner`` or a
-        lidar (no people are tracked then)."""
-        base, lidar = ctx.robot.base, ctx.robot.lidar
-        if base is None or lidar is None or ctx.robot.occupancy is None or not nav_settings(ctx).local_planner:
-            return None
-        return cls(ctx, local_planner(ctx, local_drive_config(ctx, base, None).planner))
-
-    def observe(self) -> None:
-        """Feed the lidar's newest scan, when it is new, to the tracks."""
-        lidar, base = self.ctx.robot.lidar, self.ctx.robot.base
-        assert lidar is not None and base is not None
-        scan = lidar.scan()
-        if scan is not None and scan.stamp > self._stamp:
-            self._stamp = scan.stamp
-            self.planner.observe(scan, base.state().pose)
 
     def in_view(self) -> int:
         """How many tracked people stand in the camera's horizontal view cone within
@@ -269,7 +244,7 @@ class _PeopleWatch:
         the optical axis [rad], positive to its left) each, nearest first."""
         cam, base = self.ctx.robot.camera, self.ctx.robot.base
         assert cam is not None and base is not None
-        people = self.planner.circles_at(self.ctx.clock.now()).people
+        people = self.people()
         if not len(people):
             return []
         T = base.state().pose.matrix() @ cam.pose_in_base()
