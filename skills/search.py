@@ -31,7 +31,9 @@ the shelf behind them, stepping aside does (the LoCoBot lab crowd row's trials 3
 whether it cleared, the sidestep). When every location has been searched without
 finding the marker and some view was still blocked by people after all that, the search
 goes over its locations once more (``search_second_pass``) before it fails: people walk
-in front of shelves and go.
+in front of shelves and go. So it does, over those locations only, when people held the
+drive back more than :data:`SHORT_AGAIN` short of a location (the viewpoint drive looks
+from up to 0.8 m short): from there the marker can be too small to detect.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Generator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -88,6 +90,12 @@ SIDESTEP = 0.4
 MAX_SIDESTEPS = 2
 #: [s] clock time a sidestep's drive may take
 SIDESTEP_TIMEOUT = 20.0
+#: [m] a search location the drive stopped farther than this from (with the local
+#: planner a viewpoint drive held back by people looks from up to 0.8 m short of it:
+#: navigate.VIEW_SHORT) is searched again at the end when the marker was not found: from
+#: 0.4 m short of the UR3e's (1.9, 2.5), 2.3 m from the near shelf, a lower-board marker
+#: is 7 px wide in the wrist camera's image (the UR3e lab crowd row, seed 269668801)
+SHORT_AGAIN = 0.25
 
 
 @dataclass(frozen=True)
@@ -117,6 +125,8 @@ class SearchProgress:
     found_at: tuple[float, float, float] | None = None
     occluded: int = 0  #: views with people in the camera cone when first looked at
     hidden: int = 0  #: of those, views still blocked after :data:`OCCLUSION_WAIT`
+    #: labels of the locations the drive stopped more than :data:`SHORT_AGAIN` short of
+    short: list[str] = field(default_factory=list)
 
 
 def _locations(ctx: SkillContext, given: list[Any] | None) -> list[tuple[Pose2D, str]]:
@@ -367,17 +377,22 @@ def _search_stops(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str]
                   progress: SearchProgress, n_steps: int, step_deg: float, settle_s: float, n_frames: int,
                   deadline: float, timeout: float, pans: list[float | None], watch: _PeopleWatch | None) -> SkillGen:
     """The search's stops, turns and views (see :func:`search`), then, when people stood
-    in the way of a view, a second pass over the locations."""
+    in the way of a view, a second pass over the locations; else, when the drive stopped
+    short of some location (:data:`SHORT_AGAIN`), a second pass over those."""
     found = yield from _search_pass(ctx, marker, stops, skipped, progress, n_steps, step_deg, settle_s, n_frames,
                                     deadline, timeout, pans, watch)
     if found is not None:
         return found
     again = [s for s in stops if s is not None]
-    if watch is not None and progress.hidden and again:
+    if not (watch is not None and progress.hidden):
+        # only the locations looked at from short of them (people held the drive back)
+        again = [s for s in again if s[1] in progress.short]
+    if again and ((watch is not None and progress.hidden) or progress.short):
         ctx.emit("search_second_pass", marker=marker, views=progress.views, occluded=progress.occluded,
-                 locations=len(again), node=ctx.node_path)
-        log.info("search: marker %d not found with people in %d views: searching the %d locations again", marker,
-                 progress.occluded, len(again))
+                 locations=len(again), short=len(progress.short), node=ctx.node_path)
+        log.info("search: marker %d not found (people in %d views, %d locations looked at from short of them): "
+                 "searching %d locations again", marker, progress.occluded, len(progress.short), len(again))
+        progress.short.clear()
         skipped.clear()
         found = yield from _search_pass(ctx, marker, again, skipped, progress, n_steps, step_deg, settle_s, n_frames,
                                         deadline, timeout, pans, watch)
@@ -402,7 +417,8 @@ def _search_pass(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str] 
         if stop is not None:
             pose, label = stop
             try:
-                yield from drive_path(ctx, pose, label, timeout=max(1.0, deadline - ctx.clock.now()), viewpoint=True)
+                reached = yield from drive_path(ctx, pose, label, timeout=max(1.0, deadline - ctx.clock.now()),
+                                                viewpoint=True)
             except SkillFailure as e:
                 if e.kind is not FailureKind.PLANNING:
                     raise
@@ -411,6 +427,9 @@ def _search_pass(ctx: SkillContext, marker: int, stops: list[tuple[Pose2D, str] 
                 ctx.emit("search_skipped", location=label, reason=e.reason, node=ctx.node_path)
                 continue
             progress.locations_visited += 1
+            if (watch is not None and math.hypot(reached.x - pose.x, reached.y - pose.y) > SHORT_AGAIN
+                    and label not in progress.short):
+                progress.short.append(label)
         for k in range(n_steps + 1):
             if k > 0:
                 if step_deg * k >= 360.0 - 1e-6:
