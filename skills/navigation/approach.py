@@ -23,7 +23,13 @@ from mmexec.skills.base import (
     skill,
 )
 from mmexec.skills.navigation import find_standoff, simplify_path
-from mmexec.skills.navigation.navigate import base_status, costmap, drive_path, nav_settings
+from mmexec.skills.navigation.navigate import (
+    REFINE_SHORT,
+    base_status,
+    costmap,
+    drive_path,
+    nav_settings,
+)
 from mmexec.skills.perception.detect import camera_settings, emit_estimate, look, markers
 
 __all__ = ["approach"]
@@ -80,7 +86,8 @@ def approach(ctx: SkillContext, marker: int, distance: float | None = None, dist
                             angle_offsets=(0.0,), start=(base.state().pose.x, base.state().pose.y))
         if mid.ok and mid.pose is not None:
             yield from drive_path(ctx, mid.pose, f"marker {marker} viewpoint", timeout=limit,
-                                  path=simplify_path(cm, mid.path) if mid.path else None, viewpoint=True)
+                                  path=simplify_path(cm, mid.path) if mid.path else None, viewpoint=True,
+                                  view_short=REFINE_SHORT)
             better = yield from look(ctx, marker, camera_settings(ctx).detect_frames)
             if better is not None:
                 est = better

@@ -873,11 +873,13 @@ class LocalDrive:
 
     def _view_from_here(self, pose: Pose2D) -> Generator[None, None, bool]:
         """A drive to a place to look from (``view_slack`` > 0), stuck within
-        ``view_slack`` of it, ends here: brake, turn to the goal's heading, True
-        (``nav_view_short``). In the UR platforms' crowd rows people walking loops
-        through a search location or a marker's viewpoint kept the 0.81 m base 0.3-0.5 m
-        short of it for the whole drive, and the search or the approach failed."""
-        short = math.hypot(self.goal.x - pose.x, self.goal.y - pose.y)
+        ``view_slack`` of the place asked for (not of a goal moved out of an obstacle's
+        zone: the two together took a look 0.9 m from it), ends here: brake, turn to the
+        goal's heading, True (``nav_view_short``). In the UR platforms' crowd rows people
+        walking loops through a search location or a marker's viewpoint kept the 0.81 m
+        base 0.2-0.8 m short of it for the whole drive, and the search or the approach
+        failed."""
+        short = math.hypot(self._asked.x - pose.x, self._asked.y - pose.y)
         if short > self.config.view_slack:
             return False
         yield from brake(self.ctx, self.base)
