@@ -31,6 +31,8 @@ from collections.abc import Generator, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
+import numpy as np
+
 from mmexec.config.yamlload import Mark, Problems, mark_of
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import Base, BaseState, Pose2D
@@ -53,7 +55,12 @@ from mmexec.skills.navigation import (
 )
 from mmexec.skills.navigation.dwa import DwaConfig
 from mmexec.skills.navigation.limits import BaseLimits
-from mmexec.skills.navigation.local_drive import WORLD_PATH, LocalDrive, LocalDriveConfig
+from mmexec.skills.navigation.local_drive import (
+    WORLD_PATH,
+    LocalDrive,
+    LocalDriveConfig,
+    local_planner,
+)
 from mmexec.skills.navigation.local_planner import LocalPlannerConfig
 from mmexec.skills.poses import base_pose
 from mmexec.skills.primitives import Step, motion_loop
@@ -287,6 +294,9 @@ VIEWPOINT_SLACK = 0.6
 #: the lab's search location 1 the LoCoBot's search took 113 s longer (LoCoBot lab crowd
 #: seed 2904366694)
 VIEW_SHORT = 0.4
+#: [m] backing off (:func:`back_off_by`) keeps this much beyond a tracked person's safety
+#: radius (the sim's people keep 0.3 m from the footprint; the arm can reach past it)
+BACK_OFF_PERSON_GAP = 0.3
 #: [m] the same for the approach's refining viewpoint, where the marker is known and near
 #: (a look from farther refines less, and the estimate is kept when it does not): UR5e lab
 #: crowd seed 269668801 looked 0.79 m short of the marker 4 viewpoint and delivered 93 s
@@ -430,6 +440,13 @@ def back_off_by(ctx: SkillContext, distance: float, *, speed: float = 0.2,
             if free < distance:
                 ctx.emit("back_off_shortened", asked=round(distance, 3), used=round(free, 3), node=ctx.node_path)
                 distance = free
+    if distance > 0 and nav_settings(ctx).local_planner and ctx.robot.lidar is not None \
+            and ctx.robot.occupancy is not None:
+        room = _lidar_room_behind(ctx, base, start, distance)
+        if room < distance:
+            ctx.emit("back_off_shortened", asked=round(distance, 3), used=round(room, 3), by="lidar",
+                     node=ctx.node_path)
+            distance = room
     if distance <= 0.005:
         return start
     t_end = ctx.clock.now() + timeout
@@ -445,6 +462,36 @@ def back_off_by(ctx: SkillContext, distance: float, *, speed: float = 0.2,
     yield from motion_loop(ctx, base, step, fault="base fault while backing off", deadline=t_end,
                            timeout=f"backing off {distance:g} m not done after {timeout:g} s")
     return base.state().pose
+
+
+def _lidar_room_behind(ctx: SkillContext, base: Base, start: Pose2D, distance: float) -> float:
+    """How far [m] (up to ``distance``) the base can back straight off from ``start`` by
+    the lidar (the run's local planner fed the newest scan): the footprint keeps the
+    costmap's clearance (or gets no closer than now) and stays out of each tracked
+    circle's safety radius, and :data:`BACK_OFF_PERSON_GAP` beyond it for people. The
+    static-map check alone backed a UR3e 0.3 m into someone standing behind it (UR3e
+    lab crowd seed 2904366694: 1 mm from the footprint), and the turn that followed
+    swept the arm into them."""
+    planner = local_planner(ctx, local_drive_config(ctx, base, None).planner)
+    lidar = ctx.robot.lidar
+    assert lidar is not None
+    scan = lidar.scan()
+    if scan is not None:
+        planner.observe(scan, start)
+    radius = planner.config.limits.radius
+    circles = planner.circles_at(ctx.clock.now())
+    need = circles.safety_radii + np.where(circles.person, BACK_OFF_PERSON_GAP, 0.0)
+    step = 0.5 * planner.costmap.resolution
+    ds = np.arange(step, distance + 1e-9, step)
+    pts = np.stack([start.x - ds * math.cos(start.theta), start.y - ds * math.sin(start.theta)], axis=1)
+    here = float(planner.costmap.clearance_at(np.array([[start.x, start.y]]))[0])
+    ok = planner.costmap.clearance_at(pts) >= min(radius, here)
+    if len(circles):
+        gap = np.hypot(pts[:, None, 0] - circles.centres[:, 0], pts[:, None, 1] - circles.centres[:, 1]) - need
+        now = np.hypot(start.x - circles.centres[:, 0], start.y - circles.centres[:, 1]) - need
+        ok &= ~np.any((gap < 0.0) & (gap < now), axis=1)
+    blocked = np.flatnonzero(~ok)
+    return float(ds[blocked[0] - 1]) if blocked.size and blocked[0] > 0 else (0.0 if blocked.size else distance)
 
 
 def _goal_from_params(ctx: SkillContext, goal: str | None, x: float | None, y: float | None,
