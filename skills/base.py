@@ -288,15 +288,11 @@ def skill(
 # --------------------------------------------------------------------------- running
 
 
-def wait_goal(ctx: SkillContext, goal: Goal, *, timeout: float | None = None,
-              stop_when: Callable[[], bool] | None = None) -> Generator[None, None, Goal]:
+def wait_goal(ctx: SkillContext, goal: Goal, *, timeout: float | None = None) -> Generator[None, None, Goal]:
     """Yield until ``goal`` finishes; on cancellation cancel the goal and keep yielding
     until the backend reports it stopped, then re-raise. Returns the finished goal;
     raises SkillFailure(EXECUTION) if it failed, SkillFailure(TIMEOUT) past ``timeout``
-    clock seconds (after cancelling it and waiting for it to stop). ``stop_when``, checked
-    on every tick while the goal runs: once it holds, the goal is cancelled and, when the
-    device reports it stopped, returned with its state CANCELLED (the caller decides what
-    comes next) instead of raising."""
+    clock seconds (after cancelling it and waiting for it to stop)."""
     deadline = None if timeout is None else ctx.clock.now() + timeout
     try:
         while not goal.done():
@@ -305,13 +301,6 @@ def wait_goal(ctx: SkillContext, goal: Goal, *, timeout: float | None = None,
                 while not goal.done():
                     yield
                 raise SkillFailure(FailureKind.TIMEOUT, f"{goal.name} took longer than {timeout:g} s")
-            if stop_when is not None and stop_when():
-                goal.cancel()
-                while not goal.done():
-                    yield
-                if goal.state is GoalState.CANCELLED:
-                    return goal
-                break
             yield
     except SkillCancelled:
         goal.cancel()

@@ -32,14 +32,14 @@ from collections.abc import Callable, Generator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Literal, TypeVar
+from typing import Any, Literal, TypeVar
 
 import numpy as np
 
 from mmexec.config.yamlload import did_you_mean
 from mmexec.drivers.descriptions import RobotDescription, get, names
 from mmexec.drivers.geometry import wrap_angle
-from mmexec.drivers.interfaces import GoalState, GraspState, JointTrajectory
+from mmexec.drivers.interfaces import GraspState
 from mmexec.skills.base import (
     FailureKind,
     Param,
@@ -59,7 +59,6 @@ from mmexec.skills.manipulation import (
     PlanResult,
     time_parametrize,
 )
-from mmexec.skills.navigation.people_watch import PeopleWatch
 from mmexec.skills.poses import arm_joints
 from mmexec.skills.profile import declare_settings, setting
 
@@ -87,9 +86,6 @@ __all__ = [
     "workspace",
 ]
 
-if TYPE_CHECKING:
-    from mmexec.skills.navigation.obstacles import Circles
-
 log = logging.getLogger(__name__)
 
 R = TypeVar("R")
@@ -99,15 +95,6 @@ WORLD_HELD = "arm.held"
 
 #: Longest a gripper move may take [clock s].
 GRIPPER_TIMEOUT = 10.0
-#: [m] an arm motion stops when a tracked person's circle comes this near the arm's way
-#: (:func:`execute`, with ``nav.local_planner`` and a lidar)
-ARM_PERSON_GAP = 0.3
-#: [s] the way must have been clear this long before a stopped motion goes on
-ARM_CLEAR_TIME = 1.0
-#: [s] a person staying near the arm's way this long fails the motion
-ARM_HOLD_LIMIT = 60.0
-#: stops for people in one motion before it fails
-ARM_MAX_HOLDS = 10
 
 
 # --------------------------------------------------------------------------- profile
@@ -354,116 +341,14 @@ def planned(ctx: SkillContext, result: PlanResult, what: str) -> PlanResult:
 
 def execute(ctx: SkillContext, result: PlanResult, what: str) -> Generator[None, None, None]:
     """Follow the planned trajectory, at most its duration + 5 s [clock s]; a failure's
-    reason is prefixed with ``what``.
-
-    Among people (``nav.local_planner`` with a lidar: the tracked people, fed from the
-    lidar on every tick while the arm moves; :class:`~mmexec.skills.navigation.people_watch.PeopleWatch`)
-    the motion is watched: when a person's circle comes within :data:`ARM_PERSON_GAP` of
-    the arm's way (the horizontal segment from the arm's mount to the tool, at the arm's
-    posture now and at every posture of the trajectory still ahead), the arm stops and
-    holds (event ``arm_hold``), waits until nobody has been that near for
-    :data:`ARM_CLEAR_TIME`, and goes on along the rest of the trajectory from where it
-    stopped, re-timed at the speed it had (``arm_resume``); a person staying that near for
-    :data:`ARM_HOLD_LIMIT` fails the motion (EXECUTION). Speed and separation monitoring
-    (ISO/TS 15066) with a fixed separation: the sim's people give way to the base's
-    footprint, not to an arm reaching past it, and in the UR3e lab crowd row (f3e1935,
-    trial 14) one walked into the arm moving to its pre-grasp."""
+    reason is prefixed with ``what``."""
     arm = ctx.robot.arm
     assert arm is not None and result.trajectory is not None
-    traj = result.trajectory
-    watch = PeopleWatch.for_robot(ctx)
-    ws = workspace(ctx) if watch is not None else None
-    for _ in range(ARM_MAX_HOLDS + 1):
-        goal = arm.follow(traj)
-        started = ctx.clock.now()
-        near: Callable[[], bool] | None = None
-        if watch is not None and ws is not None:
-            def near(traj: JointTrajectory = traj, started: float = started) -> bool:
-                assert watch is not None and ws is not None
-                watch.observe()
-                ahead = [p for t, p in zip(traj.times, traj.positions) if t >= ctx.clock.now() - started]
-                return _person_gap(ctx, ws, watch.people(), [measured_joints(ctx), *ahead]) < ARM_PERSON_GAP
-        try:
-            done = yield from wait_goal(ctx, goal, timeout=traj.duration + 5.0, stop_when=near)
-        except SkillFailure as e:
-            raise SkillFailure(e.kind, f"{what}: {e.reason}") from None
-        if done.state is not GoalState.CANCELLED:
-            return
-        assert watch is not None and ws is not None
-        stopped = ctx.clock.now() - started
-        yield from _hold_for_people(ctx, ws, watch, traj, stopped, what)
-        rest = _rest_of(ws, traj, stopped, measured_joints(ctx))
-        ctx.emit("arm_resume", what=what, at=round(stopped, 3), duration=round(rest.duration, 3), node=ctx.node_path)
-        traj = rest
-    raise SkillFailure(FailureKind.EXECUTION, f"{what}: stopped for people {ARM_MAX_HOLDS + 1} times")
-
-
-def _person_gap(ctx: SkillContext, ws: ArmWorkspace, people: Circles, postures: Sequence[Sequence[float]]) -> float:
-    """The smallest horizontal gap [m] between a tracked person's circle and the arm's
-    way: the segments from the arm's mount to the tool at each of ``postures`` (joint
-    vectors [rad]), in ``map`` with the base where it stands now; inf without people."""
-    if not len(people):
-        return math.inf
-    arm, base = ctx.robot.arm, ctx.robot.base
-    assert arm is not None
-    T_map_base = base.state().pose.matrix() if base is not None else np.eye(4)
-    T_map_arm = T_map_base @ np.asarray(arm.mount, dtype=float)
-    a = T_map_arm[:2, 3]
-    tools = np.array([(T_map_arm @ ws.kin.fk(q))[:2, 3] for q in postures])  # (m, 2)
-    d = tools - a
-    L2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-12)
-    c = people.centres  # (k, 2)
-    s = np.clip(np.einsum("kij,ij->ki", c[:, None, :] - a, d) / L2, 0.0, 1.0)  # (k, m)
-    closest = a + s[..., None] * d[None, :, :]
-    gaps = np.linalg.norm(c[:, None, :] - closest, axis=-1) - people.radii[:, None]
-    return float(gaps.min())
-
-
-def _hold_for_people(ctx: SkillContext, ws: ArmWorkspace, watch: PeopleWatch, traj: JointTrajectory,
-                     stopped: float, what: str) -> Generator[None, None, None]:
-    """The arm stopped ``stopped`` [s] into ``traj`` for a person near its way: hold until
-    nobody has been within :data:`ARM_PERSON_GAP` of the rest of the way (from the
-    posture it holds) for :data:`ARM_CLEAR_TIME`; EXECUTION failure after
-    :data:`ARM_HOLD_LIMIT` [s]."""
-    arm = ctx.robot.arm
-    assert arm is not None
-    start = ctx.clock.now()
-    ahead = [p for t, p in zip(traj.times, traj.positions) if t >= stopped]
-    gap = _person_gap(ctx, ws, watch.people(), [measured_joints(ctx), *ahead])
-    ctx.emit("arm_hold", what=what, at=round(stopped, 3), gap=round(gap, 3), node=ctx.node_path)
-    log.info("%s: a person %.2f m from the arm's way: holding", what, gap)
-    clear_since: float | None = None
-    while True:
-        now = ctx.clock.now()
-        watch.observe()
-        if _person_gap(ctx, ws, watch.people(), [measured_joints(ctx), *ahead]) < ARM_PERSON_GAP:
-            clear_since = None
-        elif clear_since is None:
-            clear_since = now
-        if clear_since is not None and now - clear_since >= ARM_CLEAR_TIME:
-            return
-        if now - start > ARM_HOLD_LIMIT:
-            raise SkillFailure(FailureKind.EXECUTION,
-                               f"{what}: a person stayed within {ARM_PERSON_GAP:g} m of the arm's way for "
-                               f"{ARM_HOLD_LIMIT:g} s")
-        yield
-
-
-def _rest_of(ws: ArmWorkspace, traj: JointTrajectory, stopped: float, q: Sequence[float]) -> JointTrajectory:
-    """The part of ``traj`` after ``stopped`` [s] from the measured posture ``q`` [rad]
-    (where the arm stopped, on or by the path), re-timed from rest at the largest
-    fraction of the joints' velocity limits ``traj`` used."""
-    k = next((i for i, t in enumerate(traj.times) if t > stopped), len(traj.times) - 1)
-    scale, prev_t, prev = 0.05, 0.0, None
-    for t, p in zip(traj.times, traj.positions):
-        if prev is not None:
-            for lim, a, b in zip(ws.kin.limits, prev, p):
-                if math.isfinite(lim.velocity) and lim.velocity > 0:
-                    scale = max(scale, abs(b - a) / (t - prev_t) / lim.velocity)
-        prev_t, prev = t, p
-    path = [tuple(q), *traj.positions[k:]]
-    return time_parametrize(traj.joint_names, path, ws.kin.limits, velocity_scale=min(scale, 1.0),
-                            acceleration_scale=min(scale, 1.0))
+    goal = arm.follow(result.trajectory)
+    try:
+        yield from wait_goal(ctx, goal, timeout=result.trajectory.duration + 5.0)
+    except SkillFailure as e:
+        raise SkillFailure(e.kind, f"{what}: {e.reason}") from None
 
 
 def move_named(ctx: SkillContext, name: str, *, cfg: PlannerConfig | None = None) -> Generator[None, None, None]:

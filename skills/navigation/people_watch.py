@@ -1,13 +1,13 @@
-"""The lidar's tracked people while the base stands: for skills that move something other
-than the base among people (the arm).
+"""The lidar's tracked people while the base stands: for skills that look or act with
+the base at rest among people (the search's views).
 
 The drive feeds each new scan to the run's local planner (its costmap and tracks) only
-while it drives; a skill that keeps the base standing, the arm's motions above all, would
-see the tracks of the last drive, coasting and then dropped. A :class:`PeopleWatch` feeds
-the newest scan, when its stamp is new, to the same planner (so the tracks carry over to
-the next drive as they do between drives) and hands out the people tracked now, in
-``map``. Only with ``nav.local_planner`` and a lidar (:meth:`PeopleWatch.for_robot`):
-without them nobody is tracked.
+while it drives; a skill that keeps the base standing would see the tracks of the last
+drive, coasting and then dropped. A :class:`PeopleWatch` feeds the newest scan, when its
+stamp is new, to the same planner (so the tracks carry over to the next drive as they do
+between drives) and hands out the people tracked now, in ``map``. Only with
+``nav.local_planner`` and a lidar (:meth:`PeopleWatch.for_robot`): without them nobody
+is tracked.
 """
 
 from __future__ import annotations
