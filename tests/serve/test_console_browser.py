@@ -380,9 +380,13 @@ def test_console_in_chromium(tmp_path: Path, shots: Callable[[Any, str], Path]) 
                 expect(page.locator("#mission-name")).to_have_text("ask_point")
                 expect(page.locator("#state")).to_have_text("idle")
                 expect(page.locator("#finished li[data-request]")).to_have_count(0)
+                # the request form is rebuilt for the new mission in the same step that shows
+                # its description (the name comes earlier): a value typed before that is lost
+                expect(page.locator("#mission-doc")).to_have_text("Click the item.")
 
                 # ---------------------------------------------------------------- 3. click prompt
                 page.fill("#field-item", "3")
+                expect(page.locator("#field-item")).to_have_value("3")
                 page.click("#submit")
                 image = page.locator(".prompt.kind-point canvas")
                 expect(image).to_be_visible()
