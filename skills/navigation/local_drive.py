@@ -1038,22 +1038,9 @@ class LocalDrive:
 
     def _room_behind(self, pose: Pose2D, distance: float) -> float:
         """How far [m] (up to ``distance``) the base can back straight off from ``pose``
-        with the costmap's clearance and every circle's safety radius kept."""
-        lim = self.config.planner.limits
-        circles = self.planner.circles_at(self.ctx.clock.now())
-        step = 0.5 * self.planner.costmap.resolution
-        free = 0.0
-        for d in np.arange(step, distance + 1e-9, step):
-            p = np.array([[pose.x - d * math.cos(pose.theta), pose.y - d * math.sin(pose.theta)]])
-            if float(self.planner.costmap.clearance_at(p)[0]) < lim.radius:
-                break
-            if len(circles):
-                gap = np.hypot(circles.centres[:, 0] - p[0, 0], circles.centres[:, 1] - p[0, 1]) - circles.safety_radii
-                now_gap = np.hypot(circles.centres[:, 0] - pose.x, circles.centres[:, 1] - pose.y) - circles.safety_radii
-                if np.any((gap < 0.0) & (gap < now_gap)):
-                    break
-            free = float(d)
-        return free
+        with the costmap's clearance and every circle's safety radius kept
+        (:meth:`LocalPlanner.room_behind`)."""
+        return self.planner.room_behind(pose, distance, self.ctx.clock.now())
 
     def _back_off(self, distance: float, *, pressed: bool = False) -> Generator[None, None, float]:
         """Drive straight back ``distance`` [m] at :data:`BACK_OFF_SPEED` (observing

@@ -217,6 +217,32 @@ class LocalPlanner:
         self._t_tracks = scan.stamp
         return self._tracks
 
+    def room_behind(self, pose: Pose2D, distance: float, now: float, *, person_gap: float = 0.0,
+                    from_here: bool = False) -> float:
+        """How far [m] (up to ``distance``) the base can back straight off from ``pose``
+        at clock time ``now`` [s]: the footprint keeps the costmap's clearance (``from_here``:
+        or gets no closer than it is now) and every tracked circle's safety radius, plus
+        ``person_gap`` [m] for people, unless it is inside that already and not getting
+        closer. Sampled every half cell; stops at the first sample that fails."""
+        radius = self.config.limits.radius
+        circles = self.circles_at(now)
+        step = 0.5 * self.costmap.resolution
+        ds = np.arange(step, distance + 1e-9, step)
+        pts = np.stack([pose.x - ds * math.cos(pose.theta), pose.y - ds * math.sin(pose.theta)], axis=1)
+        floor = radius
+        if from_here:
+            floor = min(radius, float(self.costmap.clearance_at(np.array([[pose.x, pose.y]]))[0]))
+        ok = self.costmap.clearance_at(pts) >= floor
+        if len(circles):
+            need = circles.safety_radii + np.where(circles.person, person_gap, 0.0)
+            gap = np.hypot(pts[:, None, 0] - circles.centres[:, 0], pts[:, None, 1] - circles.centres[:, 1]) - need
+            here = np.hypot(pose.x - circles.centres[:, 0], pose.y - circles.centres[:, 1]) - need
+            ok &= ~np.any((gap < 0.0) & (gap < here), axis=1)
+        blocked = np.flatnonzero(~ok)
+        if not blocked.size:
+            return max(distance, 0.0)
+        return float(ds[blocked[0] - 1]) if blocked[0] > 0 else 0.0
+
     def circles_at(self, now: float) -> Circles:
         """The tracked circles moved to clock time ``now`` [s] at their velocities."""
         c = self._tracks

@@ -31,8 +31,6 @@ from collections.abc import Generator, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-import numpy as np
-
 from mmexec.config.yamlload import Mark, Problems, mark_of
 from mmexec.drivers.geometry import wrap_angle
 from mmexec.drivers.interfaces import Base, BaseState, Pose2D
@@ -294,14 +292,14 @@ VIEWPOINT_SLACK = 0.6
 #: the lab's search location 1 the LoCoBot's search took 113 s longer (LoCoBot lab crowd
 #: seed 2904366694)
 VIEW_SHORT = 0.4
-#: [m] backing off (:func:`back_off_by`) keeps this much beyond a tracked person's safety
-#: radius (the sim's people keep 0.3 m from the footprint; the arm can reach past it)
-BACK_OFF_PERSON_GAP = 0.3
 #: [m] the same for the approach's refining viewpoint, where the marker is known and near
 #: (a look from farther refines less, and the estimate is kept when it does not): UR5e lab
 #: crowd seed 269668801 looked 0.79 m short of the marker 4 viewpoint and delivered 93 s
 #: sooner than when it waited there
 REFINE_SHORT = 0.8
+#: [m] backing off (:func:`back_off_by`) keeps this much beyond a tracked person's safety
+#: radius (the sim's people keep 0.3 m from the footprint; the arm can reach past it)
+BACK_OFF_PERSON_GAP = 0.3
 
 
 def _require_localised(ctx: SkillContext, base: Base, label: str) -> None:
@@ -478,20 +476,7 @@ def _lidar_room_behind(ctx: SkillContext, base: Base, start: Pose2D, distance: f
     scan = lidar.scan()
     if scan is not None:
         planner.observe(scan, start)
-    radius = planner.config.limits.radius
-    circles = planner.circles_at(ctx.clock.now())
-    need = circles.safety_radii + np.where(circles.person, BACK_OFF_PERSON_GAP, 0.0)
-    step = 0.5 * planner.costmap.resolution
-    ds = np.arange(step, distance + 1e-9, step)
-    pts = np.stack([start.x - ds * math.cos(start.theta), start.y - ds * math.sin(start.theta)], axis=1)
-    here = float(planner.costmap.clearance_at(np.array([[start.x, start.y]]))[0])
-    ok = planner.costmap.clearance_at(pts) >= min(radius, here)
-    if len(circles):
-        gap = np.hypot(pts[:, None, 0] - circles.centres[:, 0], pts[:, None, 1] - circles.centres[:, 1]) - need
-        now = np.hypot(start.x - circles.centres[:, 0], start.y - circles.centres[:, 1]) - need
-        ok &= ~np.any((gap < 0.0) & (gap < now), axis=1)
-    blocked = np.flatnonzero(~ok)
-    return float(ds[blocked[0] - 1]) if blocked.size and blocked[0] > 0 else (0.0 if blocked.size else distance)
+    return planner.room_behind(start, distance, ctx.clock.now(), person_gap=BACK_OFF_PERSON_GAP, from_here=True)
 
 
 def _goal_from_params(ctx: SkillContext, goal: str | None, x: float | None, y: float | None,
